@@ -1,0 +1,336 @@
+"""The individual-target tracker: IMM filters, gating, GNN, LLR scores, sequential test.
+
+All tracks live in one structure of arrays (:class:`TrackArrays`), so each step is a handful
+of numpy operations over every track and candidate pair at once. A step builds new arrays and
+swaps them in at its end: an exception part-way leaves the tracker as it was.
+
+One step, for a scan at time t with detections z_j (covariances R_j):
+
+1. IMM prediction of every track to t (mixing, mode-matched prediction);
+2. detection probability per track: the sensor's P_D, or a resolution cell's (hybridization);
+3. gating of all track-detection pairs (k-d tree pre-gate, chi-square gate);
+4. GNN over independent clusters, maximising the summed score gain;
+5. IMM update of assigned tracks; hit or miss score increments;
+6. a tentative track at each unassigned detection, scored L(1) = ln(λ_nt/λ_fa);
+7. confirmation and deletion by the sequential test, the drop-from-peak and coasting rules.
+"""
+
+from __future__ import annotations
+
+import itertools
+from collections.abc import Sequence
+from dataclasses import dataclass, replace
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from trackers.association.gating import gate
+from trackers.association.gnn import gnn_assign
+from trackers.config import TrackerConfig
+from trackers.filters.imm import imm_combine, imm_predict, imm_update, transition_matrix
+from trackers.models.measurement import H_POSITION
+from trackers.models.motion import STATE_DIM, build_models
+from trackers.scoring import hit_increment, initial_score, miss_increment, sequential_test
+from trackers.types import Scan, StepResult, TrackSnapshot
+
+if TYPE_CHECKING:
+    from trackers.pipeline import ResolutionCell
+
+__all__ = ["TrackArrays", "IndividualTracker"]
+
+KIND = "individual"
+
+
+@dataclass(frozen=True, eq=False)
+class TrackArrays:
+    """Every individual track, one row each.
+
+    x (N, M, 5), P (N, M, 5, 5), mu (N, M): the IMM mode-conditioned estimates and mode
+    probabilities; x_comb (N, 5) and P_comb (N, 5, 5) their moment-matched combination.
+    """
+
+    ids: np.ndarray
+    x: np.ndarray
+    P: np.ndarray
+    mu: np.ndarray
+    x_comb: np.ndarray
+    P_comb: np.ndarray
+    score: np.ndarray
+    peak: np.ndarray
+    confirmed: np.ndarray
+    hits: np.ndarray
+    created: np.ndarray
+    updated: np.ndarray
+    detection_ids: np.ndarray
+
+    @staticmethod
+    def empty(n_modes: int) -> TrackArrays:
+        n = STATE_DIM
+        return TrackArrays(
+            ids=np.zeros(0, dtype=object),
+            x=np.zeros((0, n_modes, n)),
+            P=np.zeros((0, n_modes, n, n)),
+            mu=np.zeros((0, n_modes)),
+            x_comb=np.zeros((0, n)),
+            P_comb=np.zeros((0, n, n)),
+            score=np.zeros(0),
+            peak=np.zeros(0),
+            confirmed=np.zeros(0, dtype=bool),
+            hits=np.zeros(0, dtype=np.int64),
+            created=np.zeros(0),
+            updated=np.zeros(0),
+            detection_ids=np.zeros(0, dtype=object),
+        )
+
+    def __len__(self) -> int:
+        return int(self.score.size)
+
+    @property
+    def n_modes(self) -> int:
+        return int(self.mu.shape[1])
+
+    def take(self, index: np.ndarray) -> TrackArrays:
+        """The rows at ``index`` (integer indices or a boolean mask)."""
+        return TrackArrays(**{k: getattr(self, k)[index] for k in _FIELDS})
+
+    def concat(self, other: TrackArrays) -> TrackArrays:
+        return TrackArrays(
+            **{k: np.concatenate([getattr(self, k), getattr(other, k)]) for k in _FIELDS}
+        )
+
+
+_FIELDS = tuple(TrackArrays.__dataclass_fields__)
+
+
+def _objects(items: Sequence[object]) -> np.ndarray:
+    """A 1-D object array holding ``items`` as they are (tuples stay tuples)."""
+    out = np.empty(len(items), dtype=object)
+    for i, item in enumerate(items):
+        out[i] = item
+    return out
+
+
+class IndividualTracker:
+    """Tracks of individual point targets; one ``step`` per scan, scans in time order."""
+
+    def __init__(self, config: TrackerConfig | None = None) -> None:
+        self._config = config or TrackerConfig()
+        self._pending: TrackerConfig | None = None
+        self._models = build_models(self._config.motion)
+        self._tracks = TrackArrays.empty(len(self._models))
+        self._time: float | None = None
+        self._next_id = itertools.count(1)
+
+    # -- configuration -------------------------------------------------------------------
+
+    @property
+    def config(self) -> TrackerConfig:
+        """The configuration in force (or to be in force from the next scan)."""
+        return self._pending or self._config
+
+    def reconfigure(self, config: TrackerConfig) -> None:
+        """Use ``config`` from the next scan on. Tracks, scores and ids are kept; when the
+        set of motion models changes, each track restarts its modes from its combined
+        estimate with the configured initial mode probabilities."""
+        self._pending = config
+
+    def _apply_pending(self) -> tuple[TrackerConfig, tuple, TrackArrays]:
+        if self._pending is None:
+            return self._config, self._models, self._tracks
+        config = self._pending
+        models = build_models(config.motion)
+        tracks = self._tracks
+        if config.motion.models != self._config.motion.models:
+            M = len(models)
+            mu0 = np.asarray(config.motion.initial_mode_probabilities)
+            tracks = replace(
+                tracks,
+                x=np.repeat(tracks.x_comb[:, None, :], M, axis=1),
+                P=np.repeat(tracks.P_comb[:, None, :, :], M, axis=1),
+                mu=np.tile(mu0, (len(tracks), 1)),
+            )
+        return config, models, tracks
+
+    # -- the step ------------------------------------------------------------------------
+
+    def step(self, scan: Scan, cells: Sequence[ResolutionCell] = ()) -> StepResult:
+        """Process one scan (already checked by the pipeline) and return every live track."""
+        config, models, tracks = self._apply_pending()
+        tm = config.track_management
+        t = float(scan.time)
+        dt = 0.0 if self._time is None else t - self._time
+        pd_sensor = tm.pd if scan.pd is None else float(scan.pd)
+        lam_fa = tm.clutter_density if scan.clutter_density is None else float(scan.clutter_density)
+
+        n_det = scan.size
+        assigned_det = np.zeros(n_det, dtype=bool)
+        if len(tracks):
+            tracks, assigned_det = self._update_existing(
+                tracks, models, config, scan, dt, pd_sensor, lam_fa, cells
+            )
+
+        born = self._initiate(scan, ~assigned_det, config, lam_fa)
+        n_old = len(tracks)
+        tracks = tracks.concat(born)
+
+        status = sequential_test(tracks.score, tracks.peak, tracks.confirmed, t - tracks.updated, tm)
+        delete = status.delete
+        delete[n_old:] = False  # a track is never deleted in the scan that starts it
+        deleted_ids = tuple(tracks.ids[delete & tracks.confirmed].tolist())
+        tracks = replace(tracks, confirmed=status.confirmed | (tracks.confirmed & ~delete))
+        tracks = tracks.take(~delete)
+
+        # Commit: nothing above touched self.
+        self._config, self._models, self._pending = config, models, None
+        self._tracks = tracks
+        self._time = t
+        return StepResult(time=t, sensor_id=scan.sensor_id, tracks=self.snapshot(), deleted=deleted_ids)
+
+    def _update_existing(
+        self,
+        tracks: TrackArrays,
+        models: tuple,
+        config: TrackerConfig,
+        scan: Scan,
+        dt: float,
+        pd_sensor: float,
+        lam_fa: float,
+        cells: Sequence[ResolutionCell],
+    ) -> tuple[TrackArrays, np.ndarray]:
+        Pi = transition_matrix(config.motion.sojourn_times, dt)
+        x_pred, P_pred, c_bar = imm_predict(models, tracks.x, tracks.P, tracks.mu, Pi, dt)
+        xc, Pc = imm_combine(x_pred, P_pred, c_bar)
+
+        pd = np.full(len(tracks), pd_sensor)
+        for cell in cells:
+            pd[cell.contains(xc[:, :2])] = cell.pd
+
+        pairs = gate(xc[:, :2], Pc[:, :2, :2], scan.z, scan.R, config.gating.threshold)
+        ti, dj = pairs.track, pairs.detection
+        # The mode-matched update of every gated pair gives its likelihood g_ij for the
+        # association gain, and the posterior of the pairs the assignment keeps.
+        xu, Pu, muu, loglik = imm_update(
+            x_pred[ti], P_pred[ti], c_bar[ti], scan.z[dj], scan.R[dj], H_POSITION
+        )
+        hit = hit_increment(pd[ti], loglik, lam_fa)
+        sel = gnn_assign(ti, dj, hit - miss_increment(pd[ti]), len(tracks), scan.size)
+        at, ad = ti[sel], dj[sel]
+
+        x, P, mu = x_pred.copy(), P_pred.copy(), c_bar.copy()
+        score = tracks.score + miss_increment(pd)
+        hits = tracks.hits.copy()
+        updated = tracks.updated.copy()
+        det_ids = _objects([()] * len(tracks))
+        if sel.size:
+            x[at], P[at], mu[at] = xu[sel], Pu[sel], muu[sel]
+            score[at] = tracks.score[at] + hit[sel]
+            hits[at] += 1
+            updated[at] = scan.time
+            ids = scan.detection_ids
+            for i, j in zip(at.tolist(), ad.tolist(), strict=True):
+                det_ids[i] = () if ids[j] is None else (ids[j],)
+        x_comb, P_comb = imm_combine(x, P, mu)
+        assigned = np.zeros(scan.size, dtype=bool)
+        assigned[ad] = True
+        new = replace(
+            tracks,
+            x=x,
+            P=P,
+            mu=mu,
+            x_comb=x_comb,
+            P_comb=P_comb,
+            score=score,
+            peak=np.maximum(tracks.peak, score),
+            hits=hits,
+            updated=updated,
+            detection_ids=det_ids,
+        )
+        return new, assigned
+
+    def _initiate(self, scan: Scan, free: np.ndarray, config: TrackerConfig, lam_fa: float) -> TrackArrays:
+        """A tentative track at each free detection: position z with covariance R, zero
+        velocity and turn rate with the configured standard deviations."""
+        idx = np.flatnonzero(free)
+        n = idx.size
+        M = len(config.motion.models)
+        if n == 0:
+            return TrackArrays.empty(M)
+        init = config.initiation
+        x0 = np.zeros((n, STATE_DIM))
+        x0[:, :2] = scan.z[idx]
+        P0 = np.zeros((n, STATE_DIM, STATE_DIM))
+        P0[:, :2, :2] = scan.R[idx]
+        P0[:, 2, 2] = P0[:, 3, 3] = init.velocity_std**2
+        P0[:, 4, 4] = init.turn_rate_std**2
+        L1 = initial_score(config.track_management.new_target_density, lam_fa)
+        ids = _objects([f"T{next(self._next_id)}" for _ in range(n)])
+        det_ids = _objects(
+            [() if scan.detection_ids[j] is None else (scan.detection_ids[j],) for j in idx.tolist()]
+        )
+        t = float(scan.time)
+        return TrackArrays(
+            ids=ids,
+            x=np.repeat(x0[:, None, :], M, axis=1),
+            P=np.repeat(P0[:, None, :, :], M, axis=1),
+            mu=np.tile(np.asarray(config.motion.initial_mode_probabilities), (n, 1)),
+            x_comb=x0,
+            P_comb=P0,
+            score=np.full(n, L1),
+            peak=np.full(n, L1),
+            confirmed=np.zeros(n, dtype=bool),
+            hits=np.ones(n, dtype=np.int64),
+            created=np.full(n, t),
+            updated=np.full(n, t),
+            detection_ids=det_ids,
+        )
+
+    # -- output --------------------------------------------------------------------------
+
+    @property
+    def tracks(self) -> TrackArrays:
+        """The live tracks as arrays (read-only by convention)."""
+        return self._tracks
+
+    def snapshot(self) -> tuple[TrackSnapshot, ...]:
+        """Every live track as an immutable :class:`TrackSnapshot`."""
+        tr = self._tracks
+        if not len(tr):
+            return ()
+        t = self._time if self._time is not None else 0.0
+        names = [m.name for m in self._models]
+        pos = tr.x_comb[:, :2].tolist()
+        vel = tr.x_comb[:, 2:4].tolist()
+        mu = tr.mu.tolist()
+        cov = tr.P_comb[:, :4, :4]
+        status = np.where(tr.confirmed, "confirmed", "tentative").tolist()
+        return tuple(
+            TrackSnapshot(
+                id=tid,
+                kind=KIND,
+                status=st,
+                time=t,
+                position=(p[0], p[1]),
+                velocity=(v[0], v[1]),
+                covariance=c,
+                score=s,
+                hits=h,
+                created=cr,
+                updated=up,
+                model_probabilities=dict(zip(names, m, strict=True)),
+                detection_ids=d,
+            )
+            for tid, st, p, v, c, s, h, cr, up, m, d in zip(
+                tr.ids.tolist(),
+                status,
+                pos,
+                vel,
+                cov,
+                tr.score.tolist(),
+                tr.hits.tolist(),
+                tr.created.tolist(),
+                tr.updated.tolist(),
+                mu,
+                tr.detection_ids.tolist(),
+                strict=True,
+            )
+        )

@@ -1,0 +1,82 @@
+"""Log-likelihood-ratio track scores and the sequential probability ratio test.
+
+Blackman and Popoli (1999, ch. 6) and paper 002 (eqs. 27-30): a track's score is the log of
+the ratio of the likelihood that its detections come from one target to the likelihood that
+they are false alarms. Starting from one detection,
+
+    L(1) = ln(λ_nt / λ_fa),
+
+and at each later scan
+
+    hit:   L(k) = L(k−1) + ln(P_D g(z) / λ_fa),   g(z) = Σ_j c̄_j N(ν_j; 0, S_j)  (IMM)
+    miss:  L(k) = L(k−1) + ln(1 − P_D).
+
+Wald's sequential test confirms a tentative track when ``L ≥ T_c = ln((1 − β)/α)`` and deletes
+it when ``L ≤ T_d = ln(β/(1 − α))``; a confirmed track is deleted when its score falls more
+than ``ΔL_drop`` below its peak, or when it has coasted for too long.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from trackers.config import TrackManagementConfig
+
+__all__ = [
+    "initial_score",
+    "hit_increment",
+    "miss_increment",
+    "StatusUpdate",
+    "sequential_test",
+]
+
+# ln(1 − P_D) is −∞ at P_D = 1: a miss of a sure sensor ends a track, which a large finite
+# penalty expresses without infinities in the arithmetic.
+_MIN_MISS_PROBABILITY = 1e-12
+
+
+def initial_score(new_target_density: float, clutter_density: float) -> float:
+    """L(1) = ln(λ_nt / λ_fa)."""
+    return float(np.log(new_target_density) - np.log(clutter_density))
+
+
+def hit_increment(pd: np.ndarray | float, log_likelihood: np.ndarray, clutter_density: float) -> np.ndarray:
+    """ΔL = ln P_D + ln g(z) − ln λ_fa."""
+    return np.log(pd) + log_likelihood - np.log(clutter_density)
+
+
+def miss_increment(pd: np.ndarray | float) -> np.ndarray:
+    """ΔL = ln(1 − P_D), with 1 − P_D floored at 1e-12."""
+    return np.log(np.maximum(1.0 - np.asarray(pd, dtype=float), _MIN_MISS_PROBABILITY))
+
+
+@dataclass(frozen=True)
+class StatusUpdate:
+    """Boolean masks over tracks: ``confirmed`` after the test, and ``delete``."""
+
+    confirmed: np.ndarray
+    delete: np.ndarray
+
+
+def sequential_test(
+    score: np.ndarray,
+    peak: np.ndarray,
+    confirmed: np.ndarray,
+    coast_time: np.ndarray,
+    config: TrackManagementConfig,
+) -> StatusUpdate:
+    """Apply the SPRT to tentative tracks and the drop-from-peak and coasting rules to all.
+
+    tentative:  confirm if L ≥ T_c;  delete if L ≤ T_d
+    confirmed:  delete if L_peak − L > ΔL_drop
+    any:        delete if coast_time > T_coast
+    """
+    tentative = ~confirmed
+    now_confirmed = confirmed | (tentative & (score >= config.confirm_threshold))
+    delete = (tentative & (score <= config.delete_threshold)) | (
+        confirmed & (peak - score > config.delete_drop_from_peak)
+    )
+    delete |= coast_time > config.max_coast_time
+    return StatusUpdate(confirmed=now_confirmed & ~delete, delete=delete)

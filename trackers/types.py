@@ -1,0 +1,146 @@
+"""What crosses the boundary between the service and the trackers.
+
+A :class:`Scan` is one sensor's detection batch as arrays; a :class:`TrackSnapshot` is an
+immutable picture of one track after a scan; a :class:`StepResult` is what one tracking step
+returns. Nothing here knows about JSON, Zenoh or HTTP.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import NamedTuple
+
+import numpy as np
+
+__all__ = ["ScanRejected", "Scan", "TrackSnapshot", "StepResult", "Extent"]
+
+
+class ScanRejected(ValueError):
+    """A scan the tracker refuses as a whole; tracker state is left unchanged.
+
+    ``reason`` is a short machine-readable code (``"out_of_sequence"``, ``"invalid_scan"``),
+    ``detail`` a human-readable sentence.
+    """
+
+    def __init__(self, reason: str, detail: str) -> None:
+        super().__init__(f"{reason}: {detail}")
+        self.reason = reason
+        self.detail = detail
+
+
+@dataclass(frozen=True, eq=False)
+class Scan:
+    """One sensor's detections at one time.
+
+    Attributes
+    ----------
+    sensor_id : the sensor that produced the scan.
+    time : seconds on the shared epoch.
+    z : ``(n, 2)`` measured positions ``[x, y]`` in metres.
+    R : ``(n, 2, 2)`` measurement covariances in m² (symmetric positive definite).
+    detection_ids : ``n`` optional detection ids, echoed back in tracks.
+    pd : the sensor's detection probability for this scan, or ``None`` for the configured one.
+    clutter_density : false-alarm density λ_fa per m², or ``None`` for the configured one.
+    sensor_position : ``(2,)`` sensor position, needed to use range-rates.
+    range_rate : ``(n,)`` range-rates in m/s, NaN where a detection has none (or ``None``).
+    amplitude : ``(n,)`` amplitudes, NaN where absent (or ``None``).
+    """
+
+    sensor_id: str
+    time: float
+    z: np.ndarray
+    R: np.ndarray
+    detection_ids: tuple[str | None, ...] = ()
+    pd: float | None = None
+    clutter_density: float | None = None
+    sensor_position: np.ndarray | None = None
+    range_rate: np.ndarray | None = None
+    amplitude: np.ndarray | None = None
+
+    def __post_init__(self) -> None:
+        z = np.asarray(self.z, dtype=float).reshape(-1, 2)
+        R = np.asarray(self.R, dtype=float).reshape(-1, 2, 2)
+        if R.shape[0] != z.shape[0]:
+            raise ScanRejected("invalid_scan", f"{z.shape[0]} detections but {R.shape[0]} covariances")
+        object.__setattr__(self, "z", z)
+        object.__setattr__(self, "R", R)
+        ids = tuple(self.detection_ids) if self.detection_ids else (None,) * z.shape[0]
+        if len(ids) != z.shape[0]:
+            raise ScanRejected("invalid_scan", f"{z.shape[0]} detections but {len(ids)} ids")
+        object.__setattr__(self, "detection_ids", ids)
+
+    @property
+    def size(self) -> int:
+        """Number of detections."""
+        return int(self.z.shape[0])
+
+    def subset(self, keep: np.ndarray) -> Scan:
+        """The same scan restricted to the detections where the boolean mask ``keep`` is true."""
+        keep = np.asarray(keep, dtype=bool)
+        idx = np.flatnonzero(keep)
+        return Scan(
+            sensor_id=self.sensor_id,
+            time=self.time,
+            z=self.z[idx],
+            R=self.R[idx],
+            detection_ids=tuple(self.detection_ids[i] for i in idx),
+            pd=self.pd,
+            clutter_density=self.clutter_density,
+            sensor_position=self.sensor_position,
+            range_rate=None if self.range_rate is None else self.range_rate[idx],
+            amplitude=None if self.amplitude is None else self.amplitude[idx],
+        )
+
+
+@dataclass(frozen=True)
+class Extent:
+    """An extent ellipse: ``matrix`` (2x2, m²), its ``semi_axes`` (m) and ``orientation`` (rad)."""
+
+    matrix: np.ndarray
+    semi_axes: tuple[float, float]
+    orientation: float
+
+
+class TrackSnapshot(NamedTuple):
+    """An immutable picture of one track at ``time``.
+
+    ``covariance`` is 4x4 over ``[x, y, vx, vy]``. The optional fields are filled by the track
+    kinds that have them (extent, point-pattern attitude and shape, formation membership).
+    A named tuple, because thousands are made each scan and a tuple is the cheapest to build.
+    """
+
+    id: str
+    kind: str
+    status: str
+    time: float
+    position: tuple[float, float]
+    velocity: tuple[float, float]
+    covariance: np.ndarray
+    score: float
+    hits: int
+    created: float
+    updated: float
+    model_probabilities: dict[str, float] | None = None
+    detection_ids: tuple[str, ...] = ()
+    extent: Extent | None = None
+    attitude: float | None = None
+    shape_probabilities: dict[str, float] | None = None
+    members: tuple[str, ...] | None = None
+    formation_id: str | None = None
+
+    @property
+    def confirmed(self) -> bool:
+        return self.status == "confirmed"
+
+
+@dataclass(frozen=True)
+class StepResult:
+    """What one tracking step returns: every live track (tentative too) and the ids deleted."""
+
+    time: float
+    sensor_id: str
+    tracks: tuple[TrackSnapshot, ...]
+    deleted: tuple[str, ...]
+
+    def confirmed(self) -> tuple[TrackSnapshot, ...]:
+        return tuple(t for t in self.tracks if t.confirmed)
