@@ -1,0 +1,177 @@
+"""The individual tracker on small scenes whose right answer is known."""
+
+import math
+
+import numpy as np
+import pytest
+
+from trackers.config import TrackerConfig
+from trackers.individual import IndividualTracker
+from trackers.types import Scan
+
+SIGMA = 5.0
+
+
+def scan_at(t, points, sensor="r1", pd=None, lam=None, sigma=SIGMA, ids=None):
+    z = np.asarray(points, dtype=float).reshape(-1, 2)
+    return Scan(sensor, float(t), z, np.tile(sigma**2 * np.eye(2), (len(z), 1, 1)),
+                detection_ids=ids or (), pd=pd, clutter_density=lam)
+
+
+def config(**tm):
+    return TrackerConfig().merged({"track_management": tm} if tm else {})
+
+
+def test_single_target_is_confirmed_and_followed_by_one_track():
+    tr = IndividualTracker(config(pd=1.0 - 1e-6, clutter_density=1e-6))
+    rng = np.random.default_rng(0)
+    ids_seen = set()
+    errors = []
+    for k in range(30):
+        truth = np.array([100.0 + 10.0 * k, -50.0 + 5.0 * k])
+        res = tr.step(scan_at(k, truth + rng.normal(0, SIGMA, 2)))
+        conf = res.confirmed()
+        ids_seen |= {t.id for t in conf}
+        if k >= 5:
+            assert len(conf) == 1
+            errors.append(np.subtract(conf[0].position, truth))
+            assert np.allclose(conf[0].velocity, [10.0, 5.0], atol=3.0)
+    assert ids_seen == {"T1"}
+    rmse = math.sqrt(np.mean(np.sum(np.square(errors), axis=1)))
+    assert rmse < SIGMA  # filtering beats the raw measurement noise
+
+
+def test_confirmation_follows_the_score_thresholds():
+    c = config(pd=0.9, clutter_density=1e-6, new_target_density=1e-7)
+    tr = IndividualTracker(c)
+    tm = c.track_management
+    scores = []
+    for k in range(6):
+        res = tr.step(scan_at(k, [0.0, 0.0]))
+        (t,) = res.tracks
+        scores.append(t.score)
+        assert (t.status == "confirmed") == any(s >= tm.confirm_threshold for s in scores)
+    assert scores[0] == pytest.approx(math.log(1e-7 / 1e-6))
+    assert all(b > a for a, b in zip(scores, scores[1:], strict=False))
+    assert res.tracks[0].status == "confirmed"
+
+
+def test_miss_lowers_score_by_log_one_minus_pd_and_tentative_track_dies():
+    tr = IndividualTracker(config(pd=0.9, clutter_density=1e-6, new_target_density=1e-7))
+    r1 = tr.step(scan_at(0, [0.0, 0.0]))
+    r2 = tr.step(scan_at(1, np.zeros((0, 2))))
+    assert r2.tracks[0].score == pytest.approx(r1.tracks[0].score + math.log(0.1))
+    r3 = tr.step(scan_at(2, np.zeros((0, 2))))
+    assert r3.tracks == ()  # −2.3 −2.3 −2.3 < ln(1e-3) = −6.9
+    assert r3.deleted == ()  # never confirmed, so never reported
+
+
+def test_scan_pd_and_clutter_density_override_configuration():
+    tr = IndividualTracker(config(pd=0.9, clutter_density=1e-6, new_target_density=1e-7))
+    r = tr.step(scan_at(0, [0.0, 0.0], lam=1e-5))
+    assert r.tracks[0].score == pytest.approx(math.log(1e-7 / 1e-5))
+    r = tr.step(scan_at(1, np.zeros((0, 2)), pd=0.5, lam=1e-5))
+    assert r.tracks[0].score == pytest.approx(math.log(1e-2) + math.log(0.5))
+
+
+def test_confirmed_track_is_deleted_after_drop_from_peak_and_reported():
+    tr = IndividualTracker(config(pd=0.9, clutter_density=1e-6, delete_drop_from_peak=6.0,
+                                  max_coast_time=100.0))
+    for k in range(8):
+        res = tr.step(scan_at(k, [0.0, 0.0]))
+    assert res.confirmed()
+    tid = res.confirmed()[0].id
+    deleted_at = None
+    for k in range(8, 14):
+        res = tr.step(scan_at(k, np.zeros((0, 2))))
+        if res.deleted:
+            deleted_at = k
+            break
+    # each miss costs ln(0.1) = −2.30: the third miss drops 6.9 > 6 below the peak
+    assert deleted_at == 10
+    assert res.deleted == (tid,)
+
+
+def test_max_coast_time_deletes():
+    tr = IndividualTracker(config(pd=0.2, clutter_density=1e-6, max_coast_time=3.5))
+    for k in range(10):
+        res = tr.step(scan_at(k, [0.0, 0.0]))
+    assert res.confirmed()
+    for k in range(10, 15):
+        res = tr.step(scan_at(k, np.zeros((0, 2))))
+        if res.deleted:
+            break
+    # last update at 9; misses cost only ln(0.8), so coasting decides: 13 − 9 = 4 > 3.5
+    assert k == 13
+
+
+def test_track_ids_are_unique_and_never_reused():
+    tr = IndividualTracker(config(pd=0.9, clutter_density=1e-6))
+    seen = []
+    rng = np.random.default_rng(3)
+    for k in range(20):
+        res = tr.step(scan_at(k, rng.uniform(-1e4, 1e4, size=(5, 2))))
+        seen.extend(t.id for t in res.tracks if t.created == k)
+    assert len(seen) == len(set(seen)) == 100
+
+
+def test_two_crossing_targets_keep_their_ids():
+    tr = IndividualTracker(config(pd=1.0 - 1e-9, clutter_density=1e-6))
+    rng = np.random.default_rng(7)
+    owner = {}
+    for k in range(40):
+        a = np.array([-200.0 + 10 * k, -100.0 + 5 * k])  # crosses b at k = 20
+        b = np.array([-200.0 + 10 * k, 100.0 - 5 * k])
+        res = tr.step(scan_at(k, np.stack([a, b]) + rng.normal(0, 2.0, (2, 2)), sigma=2.0))
+        for t in res.confirmed():
+            who = "a" if np.linalg.norm(np.subtract(t.position, a)) < np.linalg.norm(np.subtract(t.position, b)) else "b"
+            if k < 17 or k > 23:  # away from the crossing itself
+                owner.setdefault(t.id, set()).add(who)
+    assert len(owner) == 2
+    assert all(len(v) == 1 for v in owner.values())
+
+
+def test_two_sensors_fuse_into_one_track_per_target():
+    tr = IndividualTracker(config(pd=0.95, clutter_density=1e-6))
+    rng = np.random.default_rng(11)
+    for k in range(20):
+        truth = np.array([[0.0 + 8 * k, 0.0], [500.0, 300.0 - 4 * k]])
+        tr.step(scan_at(k, truth + rng.normal(0, 5.0, (2, 2)), sensor="a", sigma=5.0))
+        res = tr.step(scan_at(k + 0.5, truth + [[4, 0], [0, -2]] + rng.normal(0, 20.0, (2, 2)),
+                              sensor="b", sigma=20.0))
+    conf = res.confirmed()
+    assert len(conf) == 2
+    assert len(res.tracks) == 2
+
+
+def test_reconfigure_applies_on_next_scan_and_can_change_models():
+    tr = IndividualTracker(config(pd=0.9))
+    tr.step(scan_at(0, [0.0, 0.0]))
+    cv_only = tr.config.merged(
+        {"motion": {"models": ["cv"], "sojourn_times": [10.0], "initial_mode_probabilities": [1.0]}}
+    )
+    tr.reconfigure(cv_only)
+    assert tr.config is cv_only
+    res = tr.step(scan_at(1, [1.0, 0.0]))
+    assert set(res.tracks[0].model_probabilities) == {"cv"}
+    assert res.tracks[0].id == "T1"
+
+
+def test_detection_ids_are_echoed():
+    tr = IndividualTracker(config())
+    res = tr.step(scan_at(0, [[0.0, 0.0], [1000.0, 0.0]], ids=("a", "b")))
+    assert sorted(t.detection_ids for t in res.tracks) == [("a",), ("b",)]
+    res = tr.step(scan_at(1, [[1.0, 0.0]], ids=("c",)))
+    assert {t.id: t.detection_ids for t in res.tracks} == {"T1": ("c",), "T2": ()}
+
+
+def test_snapshot_is_consistent_with_step_result():
+    tr = IndividualTracker(config())
+    res = tr.step(scan_at(0, [[0.0, 0.0], [50.0, 50.0]]))
+    snap = tr.snapshot()
+    assert [t.id for t in snap] == [t.id for t in res.tracks]
+    for t in snap:
+        assert t.covariance.shape == (4, 4)
+        np.testing.assert_allclose(t.covariance, t.covariance.T)
+        assert np.all(np.linalg.eigvalsh(t.covariance) > 0)
+        assert sum(t.model_probabilities.values()) == pytest.approx(1.0)
