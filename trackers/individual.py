@@ -9,9 +9,11 @@ One step, for a scan at time t with detections z_j (covariances R_j):
 1. IMM prediction of every track to t (mixing, mode-matched prediction);
 2. detection probability per track: the sensor's P_D, or a resolution cell's (hybridization);
 3. gating of all track-detection pairs (k-d tree pre-gate, chi-square gate);
-4. GNN over independent clusters, maximising the summed score gain;
+4. GNN over independent clusters, maximising the summed score gain: confirmed tracks first,
+   then tentative tracks over the detections left;
 5. IMM update of assigned tracks; hit or miss score increments;
-6. a tentative track at each unassigned detection, scored L(1) = ln(λ_nt/λ_fa);
+6. a tentative track at each detection neither assigned nor in a confirmed track's gate,
+   scored L(1) = ln(λ_nt/λ_fa);
 7. confirmation and deletion by the sequential test, the drop-from-peak and coasting rules.
 """
 
@@ -163,13 +165,13 @@ class IndividualTracker:
         lam_fa = tm.clutter_density if scan.clutter_density is None else float(scan.clutter_density)
 
         n_det = scan.size
-        assigned_det = np.zeros(n_det, dtype=bool)
+        explained = np.zeros(n_det, dtype=bool)
         if len(tracks):
-            tracks, assigned_det = self._update_existing(
+            tracks, explained = self._update_existing(
                 tracks, models, config, scan, dt, pd_sensor, lam_fa, cells
             )
 
-        born = self._initiate(scan, ~assigned_det, config, lam_fa)
+        born = self._initiate(scan, ~explained, config, lam_fa)
         n_old = len(tracks)
         tracks = tracks.concat(born)
 
@@ -213,7 +215,17 @@ class IndividualTracker:
             x_pred[ti], P_pred[ti], c_bar[ti], scan.z[dj], scan.R[dj], H_POSITION
         )
         hit = hit_increment(pd[ti], loglik, lam_fa)
-        sel = gnn_assign(ti, dj, hit - miss_increment(pd[ti]), len(tracks), scan.size)
+        gain = hit - miss_increment(pd[ti])
+        # Confirmed tracks choose first; tentative tracks share what they leave. A young track
+        # with a wide velocity gate would otherwise take a confirmed target's detections.
+        first = tracks.confirmed[ti]
+        sel = np.flatnonzero(first)[gnn_assign(ti[first], dj[first], gain[first], len(tracks), scan.size)]
+        taken = np.zeros(scan.size, dtype=bool)
+        taken[dj[sel]] = True
+        second = np.flatnonzero(~first & ~taken[dj])
+        sel = np.concatenate(
+            [sel, second[gnn_assign(ti[second], dj[second], gain[second], len(tracks), scan.size)]]
+        )
         at, ad = ti[sel], dj[sel]
 
         x, P, mu = x_pred.copy(), P_pred.copy(), c_bar.copy()
@@ -230,8 +242,12 @@ class IndividualTracker:
             for i, j in zip(at.tolist(), ad.tolist(), strict=True):
                 det_ids[i] = () if ids[j] is None else (ids[j],)
         x_comb, P_comb = imm_combine(x, P, mu)
+        # A detection in a confirmed track's gate belongs to that target's neighbourhood: when
+        # the track did not take it, it is far likelier clutter or a second detection of the
+        # same target than a new one, and starting a track on it would make a duplicate.
         assigned = np.zeros(scan.size, dtype=bool)
         assigned[ad] = True
+        assigned[dj[tracks.confirmed[ti]]] = True
         new = replace(
             tracks,
             x=x,

@@ -1,0 +1,1 @@
+"""Clients of the tracking service: publishers, replay, followers and scenario simulation."""

@@ -1,0 +1,89 @@
+"""Posterior Cramér–Rao bound: equals the Kalman covariance, converges to the Riccati limit."""
+
+from __future__ import annotations
+
+import itertools
+
+import numpy as np
+import pytest
+from scipy.linalg import solve_discrete_are
+
+from trackers.evaluation.crb import POSITION_H, cv_matrices, pcrb_linear
+
+
+def kalman_covariances(
+    F: np.ndarray, Q: np.ndarray, H: np.ndarray, R: np.ndarray, P0: np.ndarray, steps: int
+) -> np.ndarray:
+    """Covariance form of the Kalman filter with the Joseph update."""
+    P = P0.copy()
+    out: list[np.ndarray] = []
+    eye = np.eye(P.shape[0])
+    for _ in range(steps):
+        P = F @ P @ F.T + Q
+        S = H @ P @ H.T + R
+        K = P @ H.T @ np.linalg.inv(S)
+        A = eye - K @ H
+        P = A @ P @ A.T + K @ R @ K.T
+        out.append(P)
+    return np.array(out)
+
+
+def test_cv_matrices() -> None:
+    F, Q = cv_matrices(2.0, 0.5)
+    assert np.array_equal(F, [[1, 0, 2, 0], [0, 1, 0, 2], [0, 0, 1, 0], [0, 0, 0, 1]])
+    expected = 0.5 * np.array(
+        [[8 / 3, 0, 2, 0], [0, 8 / 3, 0, 2], [2, 0, 2, 0], [0, 2, 0, 2]], dtype=float
+    )
+    assert np.allclose(Q, expected)
+    assert np.allclose(Q, Q.T)
+
+
+@pytest.mark.parametrize(
+    ("dt", "q", "sigma", "p0"), [(1.0, 0.05, 5.0, 100.0), (0.5, 2.0, 20.0, 1e4)]
+)
+def test_pcrb_equals_kalman_covariance(dt: float, q: float, sigma: float, p0: float) -> None:
+    F, Q = cv_matrices(dt, q)
+    R = sigma**2 * np.eye(2)
+    P0 = np.diag([p0, 2 * p0, p0 / 10, p0 / 5])
+    P0[0, 2] = P0[2, 0] = 0.3 * np.sqrt(P0[0, 0] * P0[2, 2])
+    bounds = pcrb_linear(F, Q, POSITION_H, R, np.linalg.inv(P0), 40)
+    assert bounds.shape == (40, 4, 4)
+    kf = kalman_covariances(F, Q, POSITION_H, R, P0, 40)
+    assert np.allclose(bounds, kf, rtol=1e-8, atol=1e-10)
+
+
+def test_pcrb_decreases_to_the_steady_state() -> None:
+    F, Q = cv_matrices(1.0, 0.05)
+    H, R = POSITION_H, 25.0 * np.eye(2)
+    bounds = pcrb_linear(F, Q, H, R, 1e-6 * np.eye(4), 300)
+    # Monotone in the Loewner order from a diffuse prior.
+    for before, after in itertools.pairwise(bounds):
+        assert np.linalg.eigvalsh(before - after).min() > -1e-9 * np.abs(before).max()
+    assert np.trace(bounds[0]) > 10 * np.trace(bounds[-1])
+    # Limit: the filtered covariance of the discrete algebraic Riccati equation.
+    X = solve_discrete_are(F.T, H.T, Q, R)
+    steady = X - X @ H.T @ np.linalg.solve(H @ X @ H.T + R, H @ X)
+    assert np.allclose(bounds[-1], steady, rtol=1e-6)
+    # The steady-state position bound is below one measurement's variance σ².
+    assert bounds[-1][0, 0] < 25.0
+
+
+def test_zero_steps_and_inputs_unchanged() -> None:
+    F, Q = cv_matrices(1.0, 0.1)
+    J0 = np.eye(4)
+    copies = [a.copy() for a in (F, Q, J0)]
+    assert pcrb_linear(F, Q, POSITION_H, np.eye(2), J0, 0).shape == (0, 4, 4)
+    pcrb_linear(F, Q, POSITION_H, np.eye(2), J0, 5)
+    assert all(np.array_equal(a, b) for a, b in zip((F, Q, J0), copies, strict=True))
+
+
+def test_invalid_inputs() -> None:
+    F, Q = cv_matrices(1.0, 0.1)
+    with pytest.raises(ValueError):
+        pcrb_linear(F, Q, POSITION_H, np.eye(3), np.eye(4), 3)
+    with pytest.raises(ValueError):
+        pcrb_linear(F, Q, POSITION_H, np.eye(2), np.zeros((4, 4)), 3)
+    with pytest.raises(ValueError):
+        pcrb_linear(F, Q, POSITION_H, np.eye(2), np.eye(4), -1)
+    with pytest.raises(ValueError):
+        cv_matrices(-1.0, 0.1)

@@ -1,0 +1,97 @@
+"""Posterior Cramér–Rao bound for a linear-Gaussian system with detection probability 1.
+
+For ``x_{k+1} = F x_k + w_k``, ``w_k ~ N(0, Q)`` and ``z_k = H x_k + v_k``, ``v_k ~ N(0, R)``,
+the Fisher information ``J_k`` of the state follows the recursion of Tichavský, Muravchik
+and Nehorai ("Posterior Cramér–Rao bounds for discrete-time nonlinear filtering", IEEE TSP
+1998), which in the linear-Gaussian case reduces to::
+
+    J_{k+1} = (Q + F J_k⁻¹ Fᵀ)⁻¹ + Hᵀ R⁻¹ H
+
+and any unbiased estimator has ``E[(x̂_k − x_k)(x̂_k − x_k)ᵀ] ≥ P_k = J_k⁻¹``. This is the
+information form of the Kalman filter covariance recursion (predict
+``P⁻ = F P Fᵀ + Q``, update ``P = (P⁻⁻¹ + Hᵀ R⁻¹ H)⁻¹``), so for a linear-Gaussian system the
+PCRB equals the Kalman filter covariance started from ``P_0 = J_0⁻¹``: the Kalman filter is
+efficient.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["POSITION_H", "cv_matrices", "pcrb_linear"]
+
+POSITION_H = np.array([[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0]])
+"""Position measurement matrix for the state ``[x, y, vx, vy]``."""
+POSITION_H.setflags(write=False)
+
+
+def _spd_inverse(A: np.ndarray, name: str) -> np.ndarray:
+    """Inverse of a symmetric positive definite matrix, via Cholesky, symmetrised."""
+    try:
+        L = np.linalg.cholesky(A)
+    except np.linalg.LinAlgError as exc:
+        raise ValueError(f"{name} must be symmetric positive definite") from exc
+    L_inv = np.linalg.solve(L, np.eye(A.shape[0]))
+    return L_inv.T @ L_inv
+
+
+def pcrb_linear(
+    F: np.ndarray, Q: np.ndarray, H: np.ndarray, R: np.ndarray, J0: np.ndarray, steps: int
+) -> np.ndarray:
+    """The PCRB ``P_k = J_k⁻¹`` for ``k = 1..steps`` as a ``(steps, n, n)`` array.
+
+    ``J0`` is the (positive definite) prior information at time 0, before the first
+    prediction; ``out[k − 1]`` is the bound after ``k`` predictions and ``k`` measurements::
+
+        J_{k+1} = (Q + F J_k⁻¹ Fᵀ)⁻¹ + Hᵀ R⁻¹ H,      P_k = J_k⁻¹
+
+    Equivalently ``out[k − 1]`` is the updated Kalman filter covariance at step ``k`` for
+    ``P_0 = J_0⁻¹``. ``F``, ``Q``, ``J0`` are ``(n, n)``, ``H`` is ``(m, n)``, ``R`` is
+    ``(m, m)`` positive definite; ``Q`` may be singular as long as every predicted covariance
+    ``Q + F P Fᵀ`` is positive definite.
+    """
+    F = np.asarray(F, dtype=float)
+    Q = np.asarray(Q, dtype=float)
+    H = np.asarray(H, dtype=float)
+    R = np.asarray(R, dtype=float)
+    J0 = np.asarray(J0, dtype=float)
+    n = F.shape[0]
+    if F.shape != (n, n) or Q.shape != (n, n) or J0.shape != (n, n):
+        raise ValueError(f"F, Q, J0 must be ({n}, {n}); got {F.shape}, {Q.shape}, {J0.shape}")
+    m = H.shape[0] if H.ndim == 2 else -1
+    if H.shape != (m, n) or R.shape != (m, m):
+        raise ValueError(f"H must be (m, {n}) and R (m, m); got {H.shape}, {R.shape}")
+    if int(steps) != steps or steps < 0:
+        raise ValueError(f"steps must be a non-negative integer, got {steps!r}")
+    measurement_info = H.T @ _spd_inverse(R, "R") @ H
+    P = _spd_inverse(J0, "J0")
+    out = np.empty((int(steps), n, n))
+    for k in range(int(steps)):
+        predicted = Q + F @ P @ F.T
+        J = _spd_inverse(0.5 * (predicted + predicted.T), "Q + F P Fᵀ") + measurement_info
+        P = _spd_inverse(0.5 * (J + J.T), "J")
+        out[k] = P
+    return out
+
+
+def cv_matrices(dt: float, q: float) -> tuple[np.ndarray, np.ndarray]:
+    """Nearly constant velocity ``(F, Q)`` over ``dt`` for the state ``[x, y, vx, vy]``.
+
+    Exact discretisation of continuous white-noise acceleration with PSD ``q`` (m²/s³) per
+    axis (Bar-Shalom, Li and Kirubarajan 2001, section 6.2.2), with ``T = dt``::
+
+        F = [[1, 0, T, 0], [0, 1, 0, T], [0, 0, 1, 0], [0, 0, 0, 1]]
+        Q = q · [[T³/3, T²/2], [T²/2, T]]   for each of the pairs (x, vx) and (y, vy)
+    """
+    if not (np.isfinite(dt) and dt >= 0):
+        raise ValueError(f"dt must be a finite number >= 0, got {dt!r}")
+    if not (np.isfinite(q) and q >= 0):
+        raise ValueError(f"q must be a finite number >= 0, got {q!r}")
+    T = float(dt)
+    F = np.eye(4)
+    F[0, 2] = F[1, 3] = T
+    Q = np.zeros((4, 4))
+    Q[0, 0] = Q[1, 1] = q * T**3 / 3.0
+    Q[0, 2] = Q[2, 0] = Q[1, 3] = Q[3, 1] = q * T**2 / 2.0
+    Q[2, 2] = Q[3, 3] = q * T
+    return F, Q
