@@ -186,7 +186,13 @@ class IndividualTracker:
         self._config, self._models, self._pending = config, models, None
         self._tracks = tracks
         self._time = t
-        return StepResult(time=t, sensor_id=scan.sensor_id, tracks=self.snapshot(), deleted=deleted_ids)
+        state = (tracks, tuple(m.name for m in models), t)
+        return StepResult(
+            time=t,
+            sensor_id=scan.sensor_id,
+            deleted=deleted_ids,
+            snapshot=lambda confirmed_only: _snapshots(*state, confirmed_only=confirmed_only),
+        )
 
     def _update_existing(
         self,
@@ -307,46 +313,52 @@ class IndividualTracker:
         """The live tracks as arrays (read-only by convention)."""
         return self._tracks
 
-    def snapshot(self) -> tuple[TrackSnapshot, ...]:
-        """Every live track as an immutable :class:`TrackSnapshot`."""
-        tr = self._tracks
-        if not len(tr):
-            return ()
+    def snapshot(self, confirmed_only: bool = False) -> tuple[TrackSnapshot, ...]:
+        """Every live track (or only the confirmed ones) as immutable snapshots."""
+        names = tuple(m.name for m in self._models)
         t = self._time if self._time is not None else 0.0
-        names = [m.name for m in self._models]
-        pos = tr.x_comb[:, :2].tolist()
-        vel = tr.x_comb[:, 2:4].tolist()
-        mu = tr.mu.tolist()
-        cov = tr.P_comb[:, :4, :4]
-        status = np.where(tr.confirmed, "confirmed", "tentative").tolist()
-        return tuple(
-            TrackSnapshot(
-                id=tid,
-                kind=KIND,
-                status=st,
-                time=t,
-                position=(p[0], p[1]),
-                velocity=(v[0], v[1]),
-                covariance=c,
-                score=s,
-                hits=h,
-                created=cr,
-                updated=up,
-                model_probabilities=dict(zip(names, m, strict=True)),
-                detection_ids=d,
-            )
-            for tid, st, p, v, c, s, h, cr, up, m, d in zip(
-                tr.ids.tolist(),
-                status,
-                pos,
-                vel,
-                cov,
-                tr.score.tolist(),
-                tr.hits.tolist(),
-                tr.created.tolist(),
-                tr.updated.tolist(),
-                mu,
-                tr.detection_ids.tolist(),
-                strict=True,
-            )
+        return _snapshots(self._tracks, names, t, confirmed_only=confirmed_only)
+
+
+def _snapshots(
+    tr: TrackArrays, names: tuple[str, ...], t: float, *, confirmed_only: bool
+) -> tuple[TrackSnapshot, ...]:
+    if confirmed_only:
+        tr = tr.take(tr.confirmed)
+    if not len(tr):
+        return ()
+    pos = tr.x_comb[:, :2].tolist()
+    vel = tr.x_comb[:, 2:4].tolist()
+    cov = tr.P_comb[:, :4, :4]
+    status = np.where(tr.confirmed, "confirmed", "tentative").tolist()
+    return tuple(
+        TrackSnapshot(
+            id=tid,
+            kind=KIND,
+            status=st,
+            time=t,
+            position=(p[0], p[1]),
+            velocity=(v[0], v[1]),
+            covariance=c,
+            score=s,
+            hits=h,
+            created=cr,
+            updated=up,
+            model_probabilities=dict(zip(names, m, strict=True)),
+            detection_ids=d,
         )
+        for tid, st, p, v, c, s, h, cr, up, m, d in zip(
+            tr.ids.tolist(),
+            status,
+            pos,
+            vel,
+            cov,
+            tr.score.tolist(),
+            tr.hits.tolist(),
+            tr.created.tolist(),
+            tr.updated.tolist(),
+            tr.mu.tolist(),
+            tr.detection_ids.tolist(),
+            strict=True,
+        )
+    )

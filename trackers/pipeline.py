@@ -144,11 +144,14 @@ class TrackingPipeline:
             deleted.extend(out.deleted)
         result = self.individual.step(scan.subset(~claimed), cells=tuple(cells))
         self._last_time = scan.time
+        peer_all = tuple(peer_tracks)
+        peer_confirmed = tuple(t for t in peer_all if t.confirmed)
         return StepResult(
             time=scan.time,
             sensor_id=scan.sensor_id,
-            tracks=tuple(peer_tracks) + result.tracks,
             deleted=tuple(deleted) + result.deleted,
+            snapshot=lambda confirmed_only: (peer_confirmed if confirmed_only else peer_all)
+            + result.snapshot(confirmed_only),
         )
 
     def snapshot(self) -> tuple[TrackSnapshot, ...]:

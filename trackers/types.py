@@ -7,7 +7,9 @@ returns. Nothing here knows about JSON, Zenoh or HTTP.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
+from functools import cached_property
 from typing import NamedTuple
 
 import numpy as np
@@ -133,14 +135,30 @@ class TrackSnapshot(NamedTuple):
         return self.status == "confirmed"
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class StepResult:
-    """What one tracking step returns: every live track (tentative too) and the ids deleted."""
+    """What one tracking step returns: the ids deleted, and every live track.
+
+    ``tracks`` (tentative too) and ``confirmed()`` are built on first use from
+    ``snapshot(confirmed_only)``, which reads the tracker's state as it was after this step:
+    most callers want only the confirmed tracks, and thousands of short-lived tentative ones
+    are not worth building for them.
+    """
 
     time: float
     sensor_id: str
-    tracks: tuple[TrackSnapshot, ...]
     deleted: tuple[str, ...]
+    snapshot: Callable[[bool], tuple[TrackSnapshot, ...]]
+
+    @cached_property
+    def tracks(self) -> tuple[TrackSnapshot, ...]:
+        return self.snapshot(False)
+
+    @cached_property
+    def _confirmed(self) -> tuple[TrackSnapshot, ...]:
+        if "tracks" in self.__dict__:
+            return tuple(t for t in self.tracks if t.confirmed)
+        return self.snapshot(True)
 
     def confirmed(self) -> tuple[TrackSnapshot, ...]:
-        return tuple(t for t in self.tracks if t.confirmed)
+        return self._confirmed

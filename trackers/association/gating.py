@@ -88,14 +88,16 @@ def gate(
     if z_pred.shape[0] == 0 or z.shape[0] == 0:
         return GatedPairs(empty, empty, np.zeros(0))
     radius = np.sqrt(gamma * (max_eigenvalue_2x2(P_pred) + float(max_eigenvalue_2x2(R).max())))
-    tree = cKDTree(z)
-    hits = tree.query_ball_point(z_pred, radius, return_sorted=False)
-    counts = np.fromiter(map(len, hits), dtype=np.intp, count=len(hits))
-    total = int(counts.sum())
-    if total == 0:
+    # One radius for the tree search (the largest), then each track's own radius.
+    near = cKDTree(z_pred).sparse_distance_matrix(
+        cKDTree(z), float(radius.max()), output_type="ndarray"
+    )
+    ti = near["i"].astype(np.intp)
+    keep = near["v"] <= radius[ti]
+    ti = ti[keep]
+    dj = near["j"].astype(np.intp)[keep]
+    if ti.size == 0:
         return GatedPairs(empty, empty, np.zeros(0))
-    ti = np.repeat(np.arange(z_pred.shape[0], dtype=np.intp), counts)
-    dj = np.fromiter((j for row in hits for j in row), dtype=np.intp, count=total)
     nu = z[dj] - z_pred[ti]
     S_inv, _ = inverse_2x2(P_pred[ti] + R[dj])
     d2 = np.einsum("ki,kij,kj->k", nu, S_inv, nu)
