@@ -192,7 +192,7 @@ class SimulatedScan:
             R=self.R.copy(),
             detection_ids=tuple(self.detection_ids),
             pd=float(self.pd),
-            clutter_density=float(self.clutter_density),
+            clutter_density=self._clutter_density(),
             sensor_position=np.asarray(self.sensor_position, dtype=float),
         )
 
@@ -202,6 +202,8 @@ class SimulatedScan:
         {"sensor_id": str, "time": float,
          "detections": [{"x": float, "y": float, "cov": [[..], [..]], "id": str}, ...],
          "pd": float, "clutter_density": float, "sensor_position": [x, y]}
+
+        ``clutter_density`` is left out when the sensor has no clutter.
         """
         detections = [
             {"x": float(x), "y": float(y), "cov": cov, "id": str(det_id)}
@@ -209,14 +211,21 @@ class SimulatedScan:
                 self.z.tolist(), self.R.tolist(), self.detection_ids, strict=True
             )
         ]
-        return {
+        batch: dict[str, Any] = {
             "sensor_id": str(self.sensor_id),
             "time": float(self.time),
             "detections": detections,
             "pd": float(self.pd),
-            "clutter_density": float(self.clutter_density),
             "sensor_position": [float(v) for v in self.sensor_position],
         }
+        if self._clutter_density() is not None:
+            batch["clutter_density"] = float(self.clutter_density)
+        return batch
+
+    def _clutter_density(self) -> float | None:
+        """The contract wants λ_fa > 0: a sensor simulated without clutter states none, and
+        the tracker's configured density applies."""
+        return float(self.clutter_density) if self.clutter_density > 0 else None
 
 
 def _readonly(a: np.ndarray) -> np.ndarray:
