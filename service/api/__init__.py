@@ -1,0 +1,15 @@
+"""The REST API: one router per resource, collected in :data:`api_router`."""
+
+from __future__ import annotations
+
+from fastapi import APIRouter
+
+from service.api import config, detections, health, tracks
+
+__all__ = ["api_router"]
+
+api_router = APIRouter()
+api_router.include_router(health.router)
+api_router.include_router(tracks.router, prefix="/api/v1")
+api_router.include_router(detections.router, prefix="/api/v1")
+api_router.include_router(config.router, prefix="/api/v1")

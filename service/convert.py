@@ -1,0 +1,164 @@
+"""Wire models <-> tracker types.
+
+:func:`batch_to_scan` turns a validated :class:`~service.schemas.DetectionBatchIn` into a
+:class:`~trackers.types.Scan` with its arrays built in one go; :func:`track_to_dict` and
+:func:`report_dict` turn tracker snapshots into the contract's Track and Track report shapes
+(plain dicts, ready for orjson). Optional Track fields that do not apply are left out.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable
+from typing import Any
+
+import numpy as np
+import orjson
+
+from service.schemas import DetectionBatchIn
+from trackers.types import Scan, StepResult, TrackSnapshot
+
+__all__ = [
+    "batch_to_scan",
+    "dumps",
+    "empty_report",
+    "error_report",
+    "report_dict",
+    "track_to_dict",
+]
+
+_NAN = math.nan
+
+
+def batch_to_scan(batch: DetectionBatchIn, position_std: float) -> Scan:
+    """The batch as a Scan. Each detection's covariance is its own ``cov``, else the batch's
+    ``cov``, else ``position_std² I``; range-rates and amplitudes are NaN where absent (and the
+    arrays are ``None`` when no detection has one)."""
+    dets = batch.detections
+    n = len(dets)
+    if batch.cov is not None:
+        default: Any = batch.cov
+    else:
+        var = float(position_std) ** 2
+        default = ((var, 0.0), (0.0, var))
+    if n == 0:
+        z = np.empty((0, 2))
+        R = np.empty((0, 2, 2))
+        return Scan(
+            sensor_id=batch.sensor_id,
+            time=batch.time,
+            z=z,
+            R=R,
+            detection_ids=(),
+            pd=batch.pd,
+            clutter_density=batch.clutter_density,
+            sensor_position=_opt_array(batch.sensor_position),
+        )
+    z = np.array([(d.x, d.y) for d in dets], dtype=float)
+    R = np.array([default if d.cov is None else d.cov for d in dets], dtype=float)
+    vr = [d.vr for d in dets]
+    amp = [d.amplitude for d in dets]
+    range_rate = None
+    if any(v is not None for v in vr):
+        range_rate = np.array([_NAN if v is None else v for v in vr], dtype=float)
+    amplitude = None
+    if any(a is not None for a in amp):
+        amplitude = np.array([_NAN if a is None else a for a in amp], dtype=float)
+    return Scan(
+        sensor_id=batch.sensor_id,
+        time=batch.time,
+        z=z,
+        R=R,
+        detection_ids=tuple(d.id for d in dets),
+        pd=batch.pd,
+        clutter_density=batch.clutter_density,
+        sensor_position=_opt_array(batch.sensor_position),
+        range_rate=range_rate,
+        amplitude=amplitude,
+    )
+
+
+def _opt_array(value: tuple[float, float] | None) -> np.ndarray | None:
+    return None if value is None else np.array(value, dtype=float)
+
+
+def _floats(values: Iterable[Any]) -> list[float]:
+    return [float(v) for v in values]
+
+
+def track_to_dict(t: TrackSnapshot) -> dict[str, Any]:
+    """One Track as the contract's JSON object (optional fields only when present)."""
+    out: dict[str, Any] = {
+        "id": t.id,
+        "kind": t.kind,
+        "status": t.status,
+        "time": float(t.time),
+        "position": _floats(t.position),
+        "velocity": _floats(t.velocity),
+        "covariance": np.asarray(t.covariance, dtype=float).tolist(),
+        "score": float(t.score),
+        "hits": int(t.hits),
+        "created": float(t.created),
+        "updated": float(t.updated),
+        "model_probabilities": {str(k): float(v) for k, v in (t.model_probabilities or {}).items()},
+        "detection_ids": [str(d) for d in t.detection_ids if d is not None],
+    }
+    if t.extent is not None:
+        out["extent"] = {
+            "matrix": np.asarray(t.extent.matrix, dtype=float).tolist(),
+            "semi_axes": _floats(t.extent.semi_axes),
+            "orientation": float(t.extent.orientation),
+        }
+    if t.attitude is not None:
+        out["attitude"] = float(t.attitude)
+    if t.shape_probabilities is not None:
+        out["shape_probabilities"] = {str(k): float(v) for k, v in t.shape_probabilities.items()}
+    if t.members is not None:
+        out["members"] = [str(m) for m in t.members]
+    if t.formation_id is not None:
+        out["formation_id"] = str(t.formation_id)
+    return out
+
+
+def report_dict(
+    seq: int, result: StepResult, processing_ms: float, tracks: list[dict[str, Any]]
+) -> dict[str, Any]:
+    """The Track report of one processed batch; ``tracks`` are the confirmed tracks as dicts."""
+    return {
+        "seq": seq,
+        "time": float(result.time),
+        "sensor_id": result.sensor_id,
+        "processing_ms": round(float(processing_ms), 4),
+        "tracks": tracks,
+        "deleted": [str(d) for d in result.deleted],
+    }
+
+
+def empty_report() -> dict[str, Any]:
+    """The answer before any batch has been processed."""
+    return {
+        "seq": 0,
+        "time": None,
+        "sensor_id": None,
+        "processing_ms": 0.0,
+        "tracks": [],
+        "deleted": [],
+    }
+
+
+def error_report(
+    sensor_id: str, time: float | None, error: str, detail: str, received_bytes: int
+) -> dict[str, Any]:
+    """The contract's Error report."""
+    return {
+        "sensor_id": sensor_id,
+        "time": time,
+        "error": error,
+        "detail": detail,
+        "received_bytes": int(received_bytes),
+    }
+
+
+def dumps(obj: Any) -> bytes:
+    """JSON bytes (numpy values allowed; NaN becomes null)."""
+    return orjson.dumps(obj, option=orjson.OPT_SERIALIZE_NUMPY)

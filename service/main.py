@@ -1,0 +1,271 @@
+"""Builds the app and runs it: :func:`create_app` (FastAPI, with a lifespan that starts the
+engine and opens Zenoh, and closes both) and :func:`main`, the ``tracker-service`` entry.
+
+SIGINT and SIGTERM stop the service cleanly: uvicorn stops serving, the lifespan closes the
+Zenoh session and stops the engine, and the process exits with status 0.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+import secrets
+import signal
+import sys
+import threading
+from collections.abc import AsyncIterator, Sequence
+from typing import Any
+
+import uvicorn
+import zenoh
+from fastapi import FastAPI
+from fastapi.openapi.utils import get_openapi
+
+from service import __version__
+from service.api import api_router
+from service.engine import ConfigError, Engine, load_config_file
+from service.schemas import (
+    ConfigDocument,
+    DetectionBatchIn,
+    IngestConfig,
+)
+from service.settings import Settings, SettingsLoadError, load_settings
+from service.stats import Stats
+from service.zenoh_io import ZenohIO
+from trackers.config import TrackerConfig
+
+__all__ = ["create_app", "main"]
+
+log = logging.getLogger("service")
+
+#: Seconds between the interpreter's thread switches: short, so REST answers promptly while
+#: the tracker's worker thread is busy (the default is 5 ms).
+SWITCH_INTERVAL = 0.001
+
+
+def _resolve_token(settings: Settings) -> str:
+    if settings.api_token is not None:
+        return settings.api_token.get_secret_value()
+    token = secrets.token_urlsafe(24)
+    print(
+        f"tracker-service: no TRACKER_API_TOKEN set; the API token for writes is: {token}",
+        file=sys.stderr,
+        flush=True,
+    )
+    return token
+
+
+class ZenohStartError(RuntimeError):
+    """The Zenoh session could not be opened (the message says why)."""
+
+
+class ServiceRuntime:
+    """What runs besides the web server: the engine's worker, the Zenoh session and the demo
+    publisher. :meth:`start` and :meth:`stop` are idempotent, so the entry point can start
+    it before uvicorn (to fail early and cleanly) and the lifespan still stops it."""
+
+    def __init__(self, settings: Settings, engine: Engine) -> None:
+        self.settings = settings
+        self.engine = engine
+        self.zenoh: ZenohIO | None = None
+        self.demo: Any = None
+        self._lock = threading.Lock()
+
+    def start(self) -> None:
+        with self._lock:
+            if self.zenoh is not None:
+                return
+            s = self.settings
+            sys.setswitchinterval(SWITCH_INTERVAL)
+            zio = ZenohIO(
+                mode=s.zenoh_mode,
+                listen=s.zenoh_listen,
+                connect=s.zenoh_connect,
+                key_prefix=s.key_prefix,
+                instance_id=s.instance_id,
+                submit=self.engine.submit,
+                report_bytes=self.engine.latest_report_bytes,
+                filtered=self.engine.tracks,
+                congestion_control=s.tracks_congestion_control,
+                config_file=s.zenoh_config_file,
+            )
+            self.engine.start()
+            try:
+                zio.open()
+            except zenoh.ZError as exc:
+                self.engine.stop()
+                msg = (
+                    f"cannot open the Zenoh session (mode {s.zenoh_mode}, listen "
+                    f"{','.join(s.zenoh_listen) or 'none'}, connect "
+                    f"{','.join(s.zenoh_connect) or 'none'}): {exc}"
+                )
+                raise ZenohStartError(msg) from None
+            self.engine.sink = zio
+            self.zenoh = zio
+            if s.demo:
+                from service.demo import DemoPublisher
+
+                self.demo = DemoPublisher(s, self.engine)
+                self.demo.start()
+            log.info(
+                "tracker-service %s ready: instance %s, key prefix %r",
+                __version__,
+                s.instance_id,
+                s.key_prefix,
+            )
+
+    def stop(self) -> None:
+        with self._lock:
+            if self.zenoh is None:
+                return
+            if self.demo is not None:
+                self.demo.stop()
+                self.demo = None
+            # no new batches; the queued ones are tracked and their reports still go out
+            self.zenoh.stop_intake()
+            self.engine.stop()
+            self.zenoh.close()
+            self.zenoh = None
+            log.info("tracker-service stopped")
+
+
+def create_app(settings: Settings | None = None) -> FastAPI:
+    """The service as a FastAPI app. The engine is built here (loading ``config_file`` when it
+    exists: a bad file raises :class:`~service.engine.ConfigError`); the lifespan starts it,
+    opens Zenoh (and the demo publisher), and closes everything on shutdown."""
+    settings = settings or Settings()
+    ingest_defaults = IngestConfig(
+        max_detections_per_batch=settings.max_detections_per_batch,
+        reorder_window=settings.reorder_window,
+    )
+    loaded = None
+    if settings.config_file is not None:
+        loaded = load_config_file(settings.config_file, ingest_defaults)
+    tracker_config, ingest = loaded if loaded else (TrackerConfig(), ingest_defaults)
+    if loaded:
+        log.info("tracker configuration loaded from %s", settings.config_file)
+    stats = Stats(settings.instance_id, settings.ingest_queue_size)
+    engine = Engine(
+        tracker_config,
+        ingest,
+        stats=stats,
+        queue_size=settings.ingest_queue_size,
+        put_timeout=settings.ingest_put_timeout,
+        ingest_defaults=ingest_defaults,
+        config_file=settings.config_file,
+    )
+    token = _resolve_token(settings)
+    runtime = ServiceRuntime(settings, engine)
+
+    @contextlib.asynccontextmanager
+    async def lifespan(app: FastAPI) -> AsyncIterator[None]:
+        runtime.start()  # a no-op when main() started it already
+        try:
+            yield
+        finally:
+            runtime.stop()
+
+    app = FastAPI(
+        title="tracker-service",
+        version=__version__,
+        summary="Real-time multi-target tracking: detections in over Zenoh or REST, tracks out.",
+        lifespan=lifespan,
+    )
+    app.state.settings = settings
+    app.state.engine = engine
+    app.state.stats = stats
+    app.state.api_token = token
+    app.state.runtime = runtime
+    app.include_router(api_router)
+    _extend_openapi(app)
+    return app
+
+
+def _extend_openapi(app: FastAPI) -> None:
+    """Put the raw-body request schemas (Detection batch, configuration) in the components."""
+
+    def openapi() -> dict[str, Any]:
+        if app.openapi_schema:
+            return app.openapi_schema
+        schema = get_openapi(
+            title=app.title,
+            version=app.version,
+            summary=app.summary,
+            routes=app.routes,
+        )
+        components = schema.setdefault("components", {}).setdefault("schemas", {})
+        template = "#/components/schemas/{model}"
+        for model in (DetectionBatchIn, ConfigDocument, IngestConfig):
+            js = model.model_json_schema(ref_template=template)
+            for name, sub in js.pop("$defs", {}).items():
+                components.setdefault(name, sub)
+            components[model.__name__] = js
+        app.openapi_schema = schema
+        return schema
+
+    app.openapi = openapi  # type: ignore[method-assign]
+
+
+def _configure_logging(level: str) -> None:
+    logging.basicConfig(
+        level=level.upper(),
+        format="%(asctime)s %(levelname)-7s %(name)s: %(message)s",
+        stream=sys.stderr,
+        force=True,
+    )
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """``tracker-service``: run the service until SIGINT or SIGTERM."""
+    try:
+        settings = load_settings(argv)
+    except SettingsLoadError as exc:
+        print(f"tracker-service: {exc}", file=sys.stderr)
+        return 2
+    _configure_logging(settings.log_level)
+    try:
+        app = create_app(settings)
+    except ConfigError as exc:
+        print(f"tracker-service: {exc}", file=sys.stderr)
+        return 2
+    config = uvicorn.Config(
+        app,
+        host=settings.http_host,
+        port=settings.http_port,
+        log_config=None,
+        log_level=settings.log_level,
+        access_log=settings.log_level == "debug",
+        timeout_graceful_shutdown=1,
+        lifespan="on",
+    )
+    server = uvicorn.Server(config)
+    runtime: ServiceRuntime = app.state.runtime
+    try:
+        runtime.start()
+    except ZenohStartError as exc:
+        print(f"tracker-service: {exc}", file=sys.stderr)
+        return 1
+
+    # uvicorn re-raises the signal it stopped on once it is done; with these handlers in
+    # place that re-raise is harmless and the process exits with status 0.
+    def _stopped(signum: int, frame: Any) -> None:
+        log.debug("signal %d after shutdown ignored", signum)
+
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, _stopped)
+    try:
+        server.run()
+    except SystemExit as exc:  # uvicorn exits this way when start-up fails
+        code = exc.code if isinstance(exc.code, int) else 1
+        print("tracker-service: start-up failed (see the log above)", file=sys.stderr)
+        return code or 1
+    finally:
+        runtime.stop()
+    if not server.started:
+        print("tracker-service: start-up failed (see the log above)", file=sys.stderr)
+        return 1
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

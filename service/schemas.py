@@ -1,0 +1,342 @@
+"""Wire models, split by direction: what comes in (``*In``) and what goes out (``*Out``).
+
+The ``*In`` models are the contract's validation rules, enforced at the edge: a batch that
+passes :meth:`DetectionBatchIn.model_validate_json` carries only finite numbers, symmetric
+positive definite covariances and a well-formed sensor id. :func:`decode_batch` turns any
+failure into a :class:`BatchError` whose ``detail`` names the place, like
+``"detections[3].x: not a finite number"``.
+
+The ``*Out`` models document the reports (OpenAPI and tests); the hot path builds the same
+shapes as plain dicts (see :mod:`service.convert`) and serialises them with orjson.
+"""
+
+from __future__ import annotations
+
+import re
+from typing import Annotated, Any, Literal
+
+from pydantic import (
+    AfterValidator,
+    AllowInfNan,
+    BaseModel,
+    ConfigDict,
+    Field,
+    Strict,
+    ValidationError,
+    model_validator,
+)
+
+__all__ = [
+    "ERROR_REASONS",
+    "SENSOR_ID_PATTERN",
+    "BatchError",
+    "ConfigDocument",
+    "DetectionBatchIn",
+    "DetectionIn",
+    "ErrorReportOut",
+    "ExtentOut",
+    "IngestAcceptedOut",
+    "IngestConfig",
+    "ProcessingTimesOut",
+    "StatsOut",
+    "TrackOut",
+    "TrackReportOut",
+    "decode_batch",
+    "format_validation_error",
+    "valid_sensor_id",
+]
+
+SENSOR_ID_PATTERN = r"^[A-Za-z0-9_.\-]{1,64}$"
+_SENSOR_ID_RE = re.compile(SENSOR_ID_PATTERN)
+
+#: The ``error`` codes of an Error report, and what each means.
+ERROR_REASONS: dict[str, str] = {
+    "invalid_json": "the payload is not a JSON document",
+    "invalid_batch": "the batch breaks the contract's rules (missing, extra or bad field)",
+    "sensor_mismatch": "the batch's sensor_id differs from the last chunk of its Zenoh key",
+    "too_many_detections": "more detections than ingest.max_detections_per_batch",
+    "out_of_sequence": "the batch is older than the last processed time",
+    "invalid_scan": "the tracker refused the batch's numbers",
+    "overloaded": "the ingest queue stayed full: the batch was dropped, not processed",
+    "internal_error": "the tracker failed on this batch; no track changed",
+}
+
+
+def valid_sensor_id(value: str) -> bool:
+    """True when ``value`` is 1 to 64 of ``A-Z a-z 0-9 _ . -``."""
+    return bool(_SENSOR_ID_RE.match(value))
+
+
+# -- input ----------------------------------------------------------------------------------
+
+#: A JSON number (not a bool, not a string), finite.
+Finite = Annotated[float, Strict(), AllowInfNan(False)]
+
+
+def _check_spd(cov: tuple[tuple[float, float], tuple[float, float]]) -> Any:
+    (a, b), (c, d) = cov
+    if abs(b - c) > 1e-9 * (1.0 + abs(b)) or a <= 0.0 or a * d - b * c <= 0.0:
+        raise ValueError("not symmetric positive definite")
+    return cov
+
+
+#: A 2x2 symmetric positive definite matrix given as ``[[a, b], [b, d]]``.
+Cov2 = Annotated[tuple[tuple[Finite, Finite], tuple[Finite, Finite]], AfterValidator(_check_spd)]
+
+
+class DetectionIn(BaseModel):
+    """One detection: a measured position with optional covariance, range-rate, amplitude, id."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+    x: Finite = Field(description="east position, m")
+    y: Finite = Field(description="north position, m")
+    cov: Cov2 | None = Field(default=None, description="2x2 position covariance, m² (SPD)")
+    vr: Finite | None = Field(default=None, description="range-rate, m/s (needs sensor_position)")
+    amplitude: Finite | None = None
+    id: Annotated[str, Strict()] | None = Field(default=None, description="echoed back in tracks")
+
+
+class DetectionBatchIn(BaseModel):
+    """One sensor's detections at one time (the contract's Detection batch)."""
+
+    model_config = ConfigDict(
+        extra="forbid",
+        frozen=True,
+        json_schema_extra={
+            "examples": [
+                {
+                    "sensor_id": "radar-1",
+                    "time": 12.0,
+                    "detections": [{"x": 10.0, "y": -3.5, "id": "d17"}],
+                    "cov": [[25, 0], [0, 25]],
+                    "pd": 0.9,
+                }
+            ]
+        },
+    )
+
+    sensor_id: Annotated[str, Strict(), Field(pattern=SENSOR_ID_PATTERN)]
+    time: Finite = Field(description="seconds on the shared epoch")
+    detections: list[DetectionIn]
+    cov: Cov2 | None = Field(default=None, description="default covariance of the detections, m²")
+    sensor_position: tuple[Finite, Finite] | None = None
+    pd: Annotated[Finite, Field(gt=0.0, le=1.0)] | None = None
+    clutter_density: Annotated[Finite, Field(gt=0.0)] | None = Field(
+        default=None, description="false-alarm density per m²"
+    )
+
+    @model_validator(mode="after")
+    def _vr_needs_sensor_position(self) -> DetectionBatchIn:
+        if self.sensor_position is None:
+            for i, det in enumerate(self.detections):
+                if det.vr is not None:
+                    raise ValueError(f"detections[{i}].vr: needs the batch's sensor_position")
+        return self
+
+
+class BatchError(Exception):
+    """A batch refused at the edge: ``reason`` is one of :data:`ERROR_REASONS`."""
+
+    def __init__(self, reason: str, detail: str) -> None:
+        super().__init__(f"{reason}: {detail}")
+        self.reason = reason
+        self.detail = detail
+
+
+_MESSAGES = {
+    "finite_number": "not a finite number",
+    "float_type": "not a number",
+    "float_parsing": "not a number",
+    "missing": "missing",
+    "extra_forbidden": "unknown field",
+    "string_type": "not a string",
+    "string_pattern_mismatch": "must be 1 to 64 of A-Z a-z 0-9 _ . -",
+    "list_type": "not a list",
+    "tuple_type": "not a list",
+    "model_type": "not an object",
+    "model_attributes_type": "not an object",
+    "dict_type": "not an object",
+    "too_long": "too many items",
+    "too_short": "too few items",
+    "greater_than": "must be > {gt}",
+    "less_than_equal": "must be <= {le}",
+    "greater_than_equal": "must be >= {ge}",
+}
+
+
+def _location(loc: tuple[int | str, ...]) -> str:
+    out = ""
+    for part in loc:
+        if isinstance(part, int):
+            out += f"[{part}]"
+        else:
+            out += f".{part}" if out else part
+    return out
+
+
+def format_validation_error(exc: ValidationError) -> str:
+    """The first error of ``exc`` as ``"place: what is wrong"`` (``"; "``-joined if several,
+    at most three)."""
+    parts: list[str] = []
+    errors = exc.errors(include_url=False, include_input=False)
+    for err in errors[:3]:
+        kind = err["type"]
+        loc = err["loc"]
+        if kind == "json_invalid":
+            parts.append(f"invalid JSON: {err.get('ctx', {}).get('error', err['msg'])}")
+            continue
+        if kind == "value_error":
+            msg = str(err.get("ctx", {}).get("error", err["msg"]))
+        else:
+            template = _MESSAGES.get(kind)
+            try:
+                msg = template.format(**err.get("ctx", {})) if template else err["msg"]
+            except (KeyError, IndexError):
+                msg = err["msg"]
+        # A cov's SPD check reports at the cov itself; a tuple's shape errors one level down.
+        place = _location(tuple(loc))
+        parts.append(f"{place}: {msg}" if place else msg)
+    if len(errors) > 3:
+        parts.append(f"and {len(errors) - 3} more")
+    return "; ".join(parts)
+
+
+def decode_batch(payload: bytes | str) -> DetectionBatchIn:
+    """Parse and validate one Detection batch; raise :class:`BatchError` when it is refused.
+
+    JSON ``NaN``/``Infinity`` literals parse, then fail the finiteness rule with a precise
+    place; unparseable text is ``invalid_json``; everything else is ``invalid_batch``.
+    """
+    try:
+        return DetectionBatchIn.model_validate_json(payload)
+    except ValidationError as exc:
+        errors = exc.errors(include_url=False, include_input=False)
+        if errors and errors[0]["type"] == "json_invalid":
+            raise BatchError("invalid_json", format_validation_error(exc)) from None
+        if errors and errors[0]["type"] == "model_type" and not errors[0]["loc"]:
+            raise BatchError("invalid_batch", "the batch must be a JSON object") from None
+        raise BatchError("invalid_batch", format_validation_error(exc)) from None
+
+
+# -- output ---------------------------------------------------------------------------------
+
+
+class ExtentOut(BaseModel):
+    matrix: list[list[float]] = Field(description="2x2 extent matrix, m²")
+    semi_axes: list[float] = Field(description="ellipse semi-axes, m")
+    orientation: float = Field(description="rad")
+
+
+class TrackOut(BaseModel):
+    """One track (the contract's Track); optional fields are absent when they do not apply."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    id: str
+    kind: Literal["individual", "extended", "formation"] | str
+    status: Literal["tentative", "confirmed"]
+    time: float
+    position: list[float] = Field(description="[x, y], m")
+    velocity: list[float] = Field(description="[vx, vy], m/s")
+    covariance: list[list[float]] = Field(description="4x4 over x, y, vx, vy")
+    score: float = Field(description="log-likelihood-ratio score")
+    hits: int
+    created: float
+    updated: float
+    model_probabilities: dict[str, float]
+    detection_ids: list[str]
+    extent: ExtentOut | None = None
+    attitude: float | None = None
+    shape_probabilities: dict[str, float] | None = None
+    members: list[str] | None = None
+    formation_id: str | None = None
+
+
+class TrackReportOut(BaseModel):
+    """What the service publishes on ``{prefix}/tracks`` after each processed batch.
+
+    Before the first batch the queryable and REST answer ``seq`` 0 with ``time`` and
+    ``sensor_id`` null and no tracks.
+    """
+
+    seq: int
+    time: float | None
+    sensor_id: str | None
+    processing_ms: float
+    tracks: list[TrackOut]
+    deleted: list[str]
+
+
+class ErrorReportOut(BaseModel):
+    """What the service publishes on ``{prefix}/errors/{sensor_id}`` for a refused batch.
+
+    ``time`` is null when the payload could not be read. ``error`` is one of the codes in
+    :data:`ERROR_REASONS`.
+    """
+
+    sensor_id: str
+    time: float | None
+    error: str
+    detail: str
+    received_bytes: int
+
+
+class IngestAcceptedOut(BaseModel):
+    accepted: bool
+    seq: int | None = Field(description="the Track report's seq; null if still held back")
+
+
+class ProcessingTimesOut(BaseModel):
+    p50: float
+    p90: float
+    p99: float
+    max: float
+    mean: float
+    window: int = Field(description="how many of the last batches these are over (<= 2048)")
+
+
+class StatsOut(BaseModel):
+    instance_id: str
+    uptime_s: float
+    seq: int
+    last_time: float | None
+    batches_received: int
+    batches_processed: int
+    batches_rejected: int
+    rejected_by_reason: dict[str, int]
+    batches_dropped: int
+    detections_received: int
+    detections_processed: int
+    tracks_confirmed: int
+    tracks_tentative: int
+    queue_depth: int
+    queue_capacity: int
+    held_for_reorder: int
+    processing_ms: ProcessingTimesOut
+
+
+class IngestConfig(BaseModel):
+    """How the engine takes batches in."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+    max_detections_per_batch: Annotated[int, Strict(), Field(ge=1)] = 10000
+    reorder_window: Annotated[Finite, Field(ge=0.0)] = Field(
+        default=0.0, description="seconds a batch may be held back to put late ones in time order"
+    )
+
+
+class ConfigDocument(BaseModel):
+    """The REST configuration document: the tracker's configuration sections (see
+    ``trackers.config.TrackerConfig``) plus ``ingest``. PUT replaces it (missing fields take
+    their defaults), PATCH merges into it (JSON merge patch: ``null`` resets a field)."""
+
+    model_config = ConfigDict(extra="allow")
+
+    motion: dict[str, Any] | None = None
+    measurement: dict[str, Any] | None = None
+    initiation: dict[str, Any] | None = None
+    gating: dict[str, Any] | None = None
+    track_management: dict[str, Any] | None = None
+    ingest: IngestConfig | None = None

@@ -1,0 +1,264 @@
+"""The service's settings: one :class:`Settings`, from CLI flags > ``TRACKER_*`` variables >
+a settings file (JSON or TOML, named by ``--settings-file`` or ``TRACKER_SETTINGS_FILE``).
+
+:func:`load_settings` parses the command line and builds the settings; it raises
+:class:`SettingsLoadError` with a readable message on any bad value, which the entry point
+turns into exit code 2.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import re
+import secrets
+import tomllib
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Annotated, Any, Literal
+
+from pydantic import Field, SecretStr, ValidationError, field_validator
+from pydantic.fields import FieldInfo
+from pydantic_settings import (
+    BaseSettings,
+    NoDecode,
+    PydanticBaseSettingsSource,
+    SettingsConfigDict,
+)
+
+__all__ = ["Settings", "SettingsLoadError", "build_parser", "load_settings", "split_endpoints"]
+
+_KEY_PREFIX_RE = re.compile(r"^[^/*$#?\s]+(/[^/*$#?\s]+)*$")
+_INSTANCE_RE = re.compile(r"^[A-Za-z0-9_.\-]{1,64}$")
+
+
+def split_endpoints(value: Any) -> list[str]:
+    """``"a,b"`` or ``["a", "b"]`` -> ``["a", "b"]``; ``""``, ``"none"`` or ``None`` -> ``[]``."""
+    if value is None:
+        return []
+    if isinstance(value, str):
+        if value.strip().lower() in ("", "none"):
+            return []
+        items = value.split(",")
+    elif isinstance(value, list | tuple):
+        items = list(value)
+    else:
+        raise ValueError("expected a comma-separated string or a list of endpoints")
+    out = []
+    for item in items:
+        if not isinstance(item, str):
+            raise ValueError(f"endpoint {item!r} is not a string")
+        item = item.strip()
+        if not item:
+            continue
+        if "/" not in item:
+            raise ValueError(f"endpoint {item!r} must look like tcp/HOST:PORT")
+        out.append(item)
+    return out
+
+
+class Settings(BaseSettings):
+    """Everything the service can be told at start-up (all also as ``TRACKER_<NAME>``)."""
+
+    model_config = SettingsConfigDict(
+        env_prefix="TRACKER_", extra="forbid", validate_default=True, case_sensitive=False
+    )
+
+    settings_file: Path | None = Field(
+        default=None, description="JSON or TOML file with settings (lowest precedence)"
+    )
+    zenoh_mode: Literal["peer", "client", "router"] = Field(
+        default="peer", description="Zenoh mode"
+    )
+    zenoh_listen: Annotated[list[str], NoDecode] = Field(
+        default_factory=lambda: ["tcp/127.0.0.1:7447"],
+        description="comma-separated Zenoh endpoints to listen on ('none' for none)",
+    )
+    zenoh_connect: Annotated[list[str], NoDecode] = Field(
+        default_factory=list, description="comma-separated Zenoh endpoints to connect to"
+    )
+    zenoh_config_file: Path | None = Field(
+        default=None,
+        description="a Zenoh JSON5 config file to start from (mode/endpoints override it)",
+    )
+    key_prefix: str = Field(
+        default="tracking", description="first chunk(s) of every key expression"
+    )
+    instance_id: str = Field(
+        default_factory=lambda: secrets.token_hex(4),
+        description="this instance's id in {prefix}/alive/{instance_id}",
+    )
+    http_host: str = Field(default="127.0.0.1", description="REST listen address")
+    http_port: int = Field(default=8000, ge=0, le=65535, description="REST port (0: any free port)")
+    api_token: SecretStr | None = Field(
+        default=None, description="bearer token for writes; generated and printed once when unset"
+    )
+    config_file: Path | None = Field(
+        default=None,
+        description="tracker configuration JSON: loaded at start, saved on each change",
+    )
+    ingest_queue_size: int = Field(
+        default=1024, ge=1, description="batches waiting for the tracker"
+    )
+    ingest_put_timeout: float = Field(
+        default=2.0,
+        gt=0,
+        le=3600,
+        description="seconds a full queue may block a sender before a drop",
+    )
+    max_detections_per_batch: int = Field(
+        default=10000, ge=1, description="default of the config's ingest.max_detections_per_batch"
+    )
+    reorder_window: float = Field(
+        default=0.0, ge=0, le=3600, description="default of the config's ingest.reorder_window, s"
+    )
+    tracks_congestion_control: Literal["block", "drop"] = Field(
+        default="block", description="congestion control of the outgoing track and error reports"
+    )
+    log_level: Literal["critical", "error", "warning", "info", "debug"] = "info"
+    demo: bool = Field(default=False, description="also publish a simulated scenario in-process")
+    demo_summary_interval: float = Field(
+        default=5.0, gt=0, description="seconds between the demo's one-line track summaries"
+    )
+
+    @field_validator("zenoh_listen", "zenoh_connect", mode="before")
+    @classmethod
+    def _split(cls, value: Any) -> list[str]:
+        return split_endpoints(value)
+
+    @field_validator("log_level", "zenoh_mode", "tracks_congestion_control", mode="before")
+    @classmethod
+    def _lower(cls, value: Any) -> Any:
+        return value.strip().lower() if isinstance(value, str) else value
+
+    @field_validator("key_prefix")
+    @classmethod
+    def _check_prefix(cls, value: str) -> str:
+        if not _KEY_PREFIX_RE.match(value):
+            raise ValueError("must be one or more '/'-separated chunks without * $ # ? or spaces")
+        return value
+
+    @field_validator("instance_id")
+    @classmethod
+    def _check_instance(cls, value: str) -> str:
+        if not _INSTANCE_RE.match(value):
+            raise ValueError("must be 1 to 64 of A-Z a-z 0-9 _ . -")
+        return value
+
+    @field_validator("api_token")
+    @classmethod
+    def _check_token(cls, value: SecretStr | None) -> SecretStr | None:
+        if value is not None and not value.get_secret_value().strip():
+            return None
+        return value
+
+    @classmethod
+    def settings_customise_sources(
+        cls,
+        settings_cls: type[BaseSettings],
+        init_settings: PydanticBaseSettingsSource,
+        env_settings: PydanticBaseSettingsSource,
+        dotenv_settings: PydanticBaseSettingsSource,
+        file_secret_settings: PydanticBaseSettingsSource,
+    ) -> tuple[PydanticBaseSettingsSource, ...]:
+        return (init_settings, env_settings, SettingsFileSource(settings_cls))
+
+
+class SettingsFileSource(PydanticBaseSettingsSource):
+    """The settings file named by a higher source's ``settings_file`` (CLI flag or variable).
+
+    JSON (``.json``) or TOML (anything else); keys are the setting names, optionally under a
+    top-level ``[tracker]`` table."""
+
+    def get_field_value(self, field: FieldInfo, field_name: str) -> tuple[Any, str, bool]:
+        return None, field_name, False  # unused: __call__ reads the whole file at once
+
+    def __call__(self) -> dict[str, Any]:
+        path = self.current_state.get("settings_file")
+        if not path:
+            return {}
+        path = Path(path)
+        try:
+            text = path.read_text(encoding="utf-8")
+        except OSError as exc:
+            raise SettingsLoadError(f"settings file {path}: {exc.strerror or exc}") from None
+        try:
+            data = json.loads(text) if path.suffix.lower() == ".json" else tomllib.loads(text)
+        except (ValueError, tomllib.TOMLDecodeError) as exc:
+            raise SettingsLoadError(f"settings file {path}: {exc}") from None
+        if not isinstance(data, dict):
+            raise SettingsLoadError(f"settings file {path}: expected a table of settings")
+        if isinstance(data.get("tracker"), dict) and len(data) == 1:
+            data = data["tracker"]
+        out = {}
+        for key, value in data.items():
+            name = str(key).lower().replace("-", "_")
+            if name.startswith("tracker_"):
+                name = name[len("tracker_") :]
+            out[name] = value
+        out.pop("settings_file", None)
+        return out
+
+
+class SettingsLoadError(Exception):
+    """A setting could not be used; the message says which and why."""
+
+
+def build_parser(prog: str = "tracker-service") -> argparse.ArgumentParser:
+    """One flag per setting (``--zenoh-mode`` for ``zenoh_mode``); unset flags do not override."""
+    parser = argparse.ArgumentParser(
+        prog=prog,
+        description=(
+            "Real-time multi-target tracking service: detection batches in over Zenoh or "
+            "REST, tracks out over Zenoh and REST. Every flag is also an environment "
+            "variable TRACKER_<NAME> and a key of the settings file."
+        ),
+        argument_default=argparse.SUPPRESS,
+    )
+    for name, field in Settings.model_fields.items():
+        flag = "--" + name.replace("_", "-")
+        help_text = field.description or ""
+        default = field.get_default(call_default_factory=False)
+        if name == "instance_id":
+            help_text += " (default: random)"
+        elif default is not None and not callable(default) and name != "api_token":
+            help_text += f" (default: {default})"
+        if field.annotation is bool:
+            parser.add_argument(flag, action=argparse.BooleanOptionalAction, help=help_text)
+        else:
+            parser.add_argument(flag, metavar=name.upper(), help=help_text)
+    return parser
+
+
+def _describe(exc: ValidationError) -> str:
+    lines = []
+    for err in exc.errors(include_url=False):
+        name = ".".join(str(p) for p in err["loc"]) or "settings"
+        msg = err["msg"].removeprefix("Value error, ")
+        value = err.get("input")
+        shown = f" (got {value!r})" if isinstance(value, str | int | float) and value != "" else ""
+        if err["type"] == "extra_forbidden":
+            msg = "unknown setting"
+        lines.append(f"invalid setting {name} / TRACKER_{name.upper()}: {msg}{shown}")
+    return "\n".join(lines)
+
+
+def load_settings(argv: Sequence[str] | None = None, **overrides: Any) -> Settings:
+    """Settings from ``argv`` (flags), the environment and the settings file.
+
+    ``overrides`` act like flags. Raises :class:`SettingsLoadError` on any bad value.
+    """
+    parser = build_parser()
+    args = vars(parser.parse_args(argv))
+    args.update(overrides)
+    try:
+        return Settings(**args)
+    except ValidationError as exc:
+        raise SettingsLoadError(_describe(exc)) from None
+    except SettingsLoadError:
+        raise
+    except Exception as exc:  # pydantic-settings wraps source errors in SettingsError
+        cause = exc.__cause__ or exc.__context__
+        if isinstance(cause, SettingsLoadError):
+            raise cause from None
+        raise SettingsLoadError(str(exc)) from None

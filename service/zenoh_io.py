@@ -1,0 +1,234 @@
+"""The service's Zenoh side: one session, the detection subscriber, the report publishers,
+the state queryable and the liveliness token.
+
+The subscriber callback runs on a Zenoh thread and only copies the payload and hands it to
+the engine (whose bounded queue may block it: back-pressure for BLOCK publishers). Everything
+is undeclared and the session closed in :meth:`ZenohIO.close`; a process that keeps a
+session with a callback subscriber open never exits.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import threading
+from collections.abc import Callable
+from concurrent.futures import Future
+from pathlib import Path
+from typing import Any
+
+import zenoh
+
+from service.convert import dumps
+
+__all__ = ["ZenohIO", "make_config", "parse_selector_filters"]
+
+log = logging.getLogger("service.zenoh")
+
+_JSON = zenoh.Encoding.APPLICATION_JSON
+
+
+def make_config(
+    mode: str,
+    listen: list[str],
+    connect: list[str],
+    *,
+    config_file: Path | None = None,
+    multicast_scouting: bool = False,
+) -> zenoh.Config:
+    """A Zenoh config: ``mode``, endpoints, multicast scouting off unless asked for.
+
+    ``config_file`` (JSON5) is the starting point when given; the other arguments override it.
+    A client does not listen, so ``listen`` is ignored in client mode."""
+    conf = zenoh.Config.from_file(str(config_file)) if config_file else zenoh.Config()
+    conf.insert_json5("mode", json.dumps(mode))
+    if mode != "client":
+        conf.insert_json5("listen/endpoints", json.dumps(list(listen)))
+    if connect or not config_file:
+        conf.insert_json5("connect/endpoints", json.dumps(list(connect)))
+    conf.insert_json5("scouting/multicast/enabled", "true" if multicast_scouting else "false")
+    return conf
+
+
+def parse_selector_filters(parameters: str) -> tuple[str, set[str] | None]:
+    """``status=all;kind=individual,extended`` (Zenoh selector parameters) -> filters."""
+    status = "confirmed"
+    kinds: set[str] | None = None
+    for part in parameters.replace("&", ";").split(";"):
+        if "=" not in part:
+            continue
+        key, value = part.split("=", 1)
+        key = key.strip()
+        if key == "status" and value in ("confirmed", "tentative", "all"):
+            status = value
+        elif key == "kind" and value:
+            kinds = {k for k in value.split(",") if k}
+    return status, kinds
+
+
+class ZenohIO:
+    """Opens the session and wires it to an engine-like object.
+
+    ``submit(payload, key_sensor_id, source)`` takes each received batch;
+    ``report_bytes()`` gives the latest Track report for the queryable and
+    ``filtered(status, kinds)`` a filtered one (selector parameters ``status``, ``kind``).
+    """
+
+    def __init__(
+        self,
+        *,
+        mode: str,
+        listen: list[str],
+        connect: list[str],
+        key_prefix: str,
+        instance_id: str,
+        submit: Callable[[bytes, str | None, str], Future[Any]],
+        report_bytes: Callable[[], bytes],
+        filtered: Callable[[str, set[str] | None], dict[str, Any]] | None = None,
+        congestion_control: str = "block",
+        config_file: Path | None = None,
+    ) -> None:
+        self.mode = mode
+        self.listen = listen
+        self.connect = connect
+        self.prefix = key_prefix
+        self.instance_id = instance_id
+        self._submit = submit
+        self._report_bytes = report_bytes
+        self._filtered = filtered
+        self._cc = (
+            zenoh.CongestionControl.BLOCK
+            if congestion_control == "block"
+            else zenoh.CongestionControl.DROP
+        )
+        self._config_file = config_file
+        self._lock = threading.Lock()
+        self._closed = True
+        self.session: zenoh.Session | None = None
+        self._subscriber: Any = None
+        self._queryable: Any = None
+        self._token: Any = None
+        self._tracks_pub: zenoh.Publisher | None = None
+
+    @property
+    def detections_key(self) -> str:
+        return f"{self.prefix}/detections/**"
+
+    @property
+    def tracks_key(self) -> str:
+        return f"{self.prefix}/tracks"
+
+    @property
+    def state_key(self) -> str:
+        return f"{self.prefix}/state/tracks"
+
+    @property
+    def alive_key(self) -> str:
+        return f"{self.prefix}/alive/{self.instance_id}"
+
+    def error_key(self, sensor_id: str) -> str:
+        return f"{self.prefix}/errors/{sensor_id}"
+
+    # -- lifecycle --------------------------------------------------------------------------
+
+    def open(self) -> None:
+        """Open the session and declare everything; raises ``zenoh.ZError`` on failure (for
+        example when a listen port is taken), leaving nothing open."""
+        conf = make_config(self.mode, self.listen, self.connect, config_file=self._config_file)
+        session = zenoh.open(conf)
+        try:
+            self._tracks_pub = session.declare_publisher(
+                self.tracks_key,
+                encoding=_JSON,
+                congestion_control=self._cc,
+                reliability=zenoh.Reliability.RELIABLE,
+            )
+            self._queryable = session.declare_queryable(self.state_key, self._on_query)
+            self._token = session.liveliness().declare_token(self.alive_key)
+            self._subscriber = session.declare_subscriber(self.detections_key, self._on_sample)
+        except BaseException:
+            session.close()
+            raise
+        self.session = session
+        self._closed = False
+        log.info(
+            "zenoh %s session %s: listen %s, connect %s; subscribed to %s",
+            self.mode,
+            session.zid(),
+            self.listen if self.mode != "client" else [],
+            self.connect,
+            self.detections_key,
+        )
+
+    def stop_intake(self) -> None:
+        """Stop taking detection batches (undeclare the subscriber); reports still go out."""
+        sub, self._subscriber = self._subscriber, None
+        if sub is not None:
+            try:
+                sub.undeclare()
+            except Exception:
+                log.debug("undeclare failed", exc_info=True)
+
+    def close(self) -> None:
+        """Undeclare everything and close the session (idempotent)."""
+        with self._lock:
+            if self._closed or self.session is None:
+                return
+            self._closed = True
+        session = self.session
+        for entity in (self._subscriber, self._queryable, self._token, self._tracks_pub):
+            if entity is None:
+                continue
+            try:
+                entity.undeclare()
+            except Exception:  # already gone with the session
+                log.debug("undeclare failed", exc_info=True)
+        try:
+            session.close()
+        except Exception:
+            log.exception("closing the zenoh session failed")
+        self._subscriber = self._queryable = self._token = self._tracks_pub = None
+        log.info("zenoh session closed")
+
+    @property
+    def closed(self) -> bool:
+        return self._closed
+
+    # -- callbacks (Zenoh threads: copy, hand off, return) ----------------------------------
+
+    def _on_sample(self, sample: zenoh.Sample) -> None:
+        try:
+            payload = sample.payload.to_bytes()
+            key = str(sample.key_expr)
+            sensor = key.rsplit("/", 1)[-1]
+            self._submit(payload, sensor, "zenoh")
+        except Exception:
+            log.exception("could not take a detection batch")
+
+    def _on_query(self, query: zenoh.Query) -> None:
+        try:
+            params = str(query.parameters)
+            if params and self._filtered is not None:
+                status, kinds = parse_selector_filters(params)
+                data = dumps(self._filtered(status, kinds))
+            else:
+                data = self._report_bytes()
+            query.reply(self.state_key, data, encoding=_JSON)
+        except Exception:
+            log.exception("could not answer a query")
+        finally:
+            query.drop()
+
+    # -- publishing (the engine's worker thread, and submitters on overload) ----------------
+
+    def publish_tracks(self, data: bytes) -> None:
+        pub = self._tracks_pub
+        if self._closed or pub is None:
+            return
+        pub.put(data)
+
+    def publish_error(self, sensor_id: str, data: bytes) -> None:
+        session = self.session
+        if self._closed or session is None:
+            return
+        session.put(self.error_key(sensor_id), data, encoding=_JSON, congestion_control=self._cc)

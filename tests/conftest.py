@@ -1,0 +1,150 @@
+"""Shared fixtures: free ports, a real service (in-process uvicorn + real Zenoh peer) and a
+second Zenoh session connected to it. Every Zenoh session is closed in a ``finally`` so pytest
+never hangs on a live callback."""
+
+from __future__ import annotations
+
+import json
+import socket
+import threading
+import time
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass
+from typing import Any
+
+import pytest
+
+SERVICE_TOKEN = "test-token"
+
+
+def free_port() -> int:
+    """A TCP port free on 127.0.0.1 right now."""
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+@pytest.fixture
+def port() -> int:
+    return free_port()
+
+
+@dataclass
+class RunningService:
+    """A service running in this process: its URL, Zenoh endpoint, token and app."""
+
+    url: str
+    endpoint: str
+    token: str
+    prefix: str
+    app: Any
+    server: Any
+    thread: threading.Thread
+
+    @property
+    def engine(self) -> Any:
+        return self.app.state.engine
+
+    @property
+    def auth(self) -> dict[str, str]:
+        return {"Authorization": f"Bearer {self.token}"}
+
+    def stop(self) -> None:
+        self.server.should_exit = True
+        self.thread.join(10)
+
+
+def start_service(**overrides: Any) -> RunningService:
+    """Start the real service (uvicorn in a thread, Zenoh peer on a free loopback port)."""
+    import uvicorn
+
+    from service.main import create_app
+    from service.settings import Settings
+
+    zport, hport = free_port(), free_port()
+    values: dict[str, Any] = {
+        "zenoh_mode": "peer",
+        "zenoh_listen": f"tcp/127.0.0.1:{zport}",
+        "zenoh_connect": "none",
+        "http_host": "127.0.0.1",
+        "http_port": hport,
+        "api_token": SERVICE_TOKEN,
+        "key_prefix": "tracking",
+        "log_level": "warning",
+    }
+    values.update(overrides)
+    settings = Settings(**values)
+    app = create_app(settings)
+    config = uvicorn.Config(
+        app,
+        host="127.0.0.1",
+        port=hport,
+        log_config=None,
+        log_level="warning",
+        lifespan="on",
+        timeout_graceful_shutdown=1,
+    )
+    server = uvicorn.Server(config)
+    thread = threading.Thread(target=server.run, name=f"uvicorn-{hport}", daemon=True)
+    thread.start()
+    deadline = time.monotonic() + 15
+    while not server.started:
+        if not thread.is_alive() or time.monotonic() > deadline:
+            server.should_exit = True
+            thread.join(5)
+            raise RuntimeError("the service did not start")
+        time.sleep(0.01)
+    return RunningService(
+        url=f"http://127.0.0.1:{hport}",
+        endpoint=settings.zenoh_listen[0],
+        token=SERVICE_TOKEN,
+        prefix=settings.key_prefix,
+        app=app,
+        server=server,
+        thread=thread,
+    )
+
+
+@pytest.fixture
+def service_factory() -> Iterator[Callable[..., RunningService]]:
+    """``service_factory(**settings)`` starts a service; all are stopped after the test."""
+    started: list[RunningService] = []
+
+    def factory(**overrides: Any) -> RunningService:
+        svc = start_service(**overrides)
+        started.append(svc)
+        return svc
+
+    try:
+        yield factory
+    finally:
+        for svc in started:
+            svc.stop()
+
+
+@pytest.fixture
+def service(service_factory: Callable[..., RunningService]) -> RunningService:
+    """A fresh service with default settings."""
+    return service_factory()
+
+
+def open_peer(endpoint: str) -> Any:
+    """A Zenoh peer session connected to ``endpoint`` (multicast scouting off)."""
+    import zenoh
+
+    conf = zenoh.Config()
+    conf.insert_json5("mode", '"peer"')
+    conf.insert_json5("connect/endpoints", json.dumps([endpoint]))
+    conf.insert_json5("listen/endpoints", "[]")
+    conf.insert_json5("scouting/multicast/enabled", "false")
+    return zenoh.open(conf)
+
+
+@pytest.fixture
+def peer(service: RunningService) -> Iterator[Any]:
+    """A second Zenoh session connected to the ``service`` fixture's endpoint."""
+    session = open_peer(service.endpoint)
+    try:
+        yield session
+    finally:
+        session.close()

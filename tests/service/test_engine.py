@@ -1,0 +1,348 @@
+"""The engine with the real tracking pipeline: reports, refusals, reordering, configuration,
+overload and stopping (no network; reports go to a list)."""
+
+from __future__ import annotations
+
+import threading
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import orjson
+import pytest
+
+from clients.scenarios.multitarget import reference_scenario, simulate
+from service.engine import (
+    ConfigError,
+    Engine,
+    IngestResult,
+    load_config_file,
+    merge_patch,
+)
+from service.schemas import IngestConfig
+from trackers.config import TrackerConfig
+from trackers.pipeline import TrackingPipeline
+from trackers.types import Scan, StepResult
+
+from .helpers import check_report, match_truth
+
+pytestmark = pytest.mark.timeout(120)
+
+
+class ListSink:
+    def __init__(self) -> None:
+        self.tracks: list[dict[str, Any]] = []
+        self.errors: list[tuple[str, dict[str, Any]]] = []
+        self._lock = threading.Lock()
+
+    def publish_tracks(self, data: bytes) -> None:
+        with self._lock:
+            self.tracks.append(orjson.loads(data))
+
+    def publish_error(self, sensor_id: str, data: bytes) -> None:
+        with self._lock:
+            self.errors.append((sensor_id, orjson.loads(data)))
+
+
+@pytest.fixture(scope="module")
+def scans() -> list[Any]:
+    return simulate(reference_scenario(3))
+
+
+@pytest.fixture
+def sink() -> ListSink:
+    return ListSink()
+
+
+@pytest.fixture
+def engine(sink: ListSink) -> Any:
+    eng = Engine(sink=sink)
+    eng.start()
+    try:
+        yield eng
+    finally:
+        eng.stop()
+
+
+def _payload(scan: Any, **changes: Any) -> bytes:
+    return orjson.dumps({**scan.to_batch(), **changes})
+
+
+def _run(engine: Engine, payloads: list[bytes], key: str | None = "radar-1") -> list[IngestResult]:
+    futures = [engine.submit(p, key, "test") for p in payloads]
+    return [f.result(timeout=30) for f in futures]
+
+
+def test_reports_follow_the_truth(engine: Engine, sink: ListSink, scans: list[Any]) -> None:
+    results = _run(engine, [_payload(s) for s in scans[:30]])
+    assert [r.seq for r in results] == list(range(1, 31))
+    assert [r["seq"] for r in sink.tracks] == list(range(1, 31))
+    last = sink.tracks[-1]
+    check_report(last)
+    assert last == engine.latest_report()
+    assert orjson.loads(engine.latest_report_bytes()) == last
+    truth = scans[29].truth_states
+    matched, errors = match_truth(last["tracks"], truth)
+    assert matched >= 0.9 * len(truth), (matched, len(truth))
+    assert np.median(errors) < 10.0
+    stats = engine.stats.snapshot()
+    assert stats["batches_processed"] == 30 and stats["batches_rejected"] == 0
+    assert stats["detections_processed"] == sum(s.z.shape[0] for s in scans[:30])
+    assert stats["processing_ms"]["window"] == 30
+    assert stats["tracks_confirmed"] == len(last["tracks"])
+
+
+def test_all_tracks_and_lookup_include_tentative(engine: Engine, scans: list[Any]) -> None:
+    _run(engine, [_payload(s) for s in scans[:6]])
+    every = engine.tracks("all")["tracks"]
+    confirmed = engine.tracks("confirmed")["tracks"]
+    tentative = engine.tracks("tentative")["tracks"]
+    assert len(every) == len(confirmed) + len(tentative)
+    assert tentative, "clutter should leave tentative tracks"
+    assert all(t["status"] == "tentative" for t in tentative)
+    assert engine.track(tentative[0]["id"]) == tentative[0]
+    assert engine.track(confirmed[0]["id"]) == confirmed[0]
+    assert engine.track("nope") is None
+    assert engine.tracks("all", {"formation"})["tracks"] == []
+    assert engine.tracks("all", {"individual"})["tracks"] == every
+
+
+BAD_INPUTS: list[tuple[str, Any, str | None]] = [
+    ("invalid_json", b"{oops", "radar-1"),
+    ("invalid_batch", b'{"sensor_id": "radar-1", "time": 99.0}', "radar-1"),
+    (
+        "invalid_batch",
+        b'{"sensor_id": "radar-1", "time": 99.0, "detections": [{"x": NaN, "y": 0}]}',
+        "radar-1",
+    ),
+    (
+        "invalid_batch",
+        orjson.dumps(
+            {
+                "sensor_id": "radar-1",
+                "time": 99.0,
+                "detections": [{"x": 1, "y": 1, "cov": [[1, 3], [3, 1]]}],
+            }
+        ),
+        "radar-1",
+    ),
+    (
+        "sensor_mismatch",
+        orjson.dumps({"sensor_id": "radar-2", "time": 99.0, "detections": []}),
+        "radar-1",
+    ),
+    (
+        "out_of_sequence",
+        orjson.dumps({"sensor_id": "radar-1", "time": 0.5, "detections": []}),
+        "radar-1",
+    ),
+]
+
+
+@pytest.mark.parametrize(("reason", "payload", "key"), BAD_INPUTS)
+def test_bad_input_changes_nothing(
+    engine: Engine, sink: ListSink, scans: list[Any], reason: str, payload: bytes, key: str
+) -> None:
+    _run(engine, [_payload(s) for s in scans[:5]])
+    before = engine.latest_report_bytes()
+    before_all = engine.tracks("all")
+    result = engine.submit(payload, key, "test").result(timeout=10)
+    assert not result.accepted and result.error is not None
+    assert result.error["error"] == reason
+    assert result.error["received_bytes"] == len(payload)
+    assert set(result.error) == {"sensor_id", "time", "error", "detail", "received_bytes"}
+    assert sink.errors[-1] == ("radar-1", result.error)
+    assert engine.latest_report_bytes() == before
+    assert engine.tracks("all") == before_all
+    assert engine.stats.snapshot()["rejected_by_reason"] == {reason: 1}
+    # the next good batch is processed as if nothing had happened
+    good = engine.submit(_payload(scans[5]), "radar-1", "test").result(timeout=10)
+    assert good.accepted and good.seq == 6
+
+
+def test_error_report_names_what_it_can(engine: Engine, sink: ListSink) -> None:
+    r = engine.submit(b'{"sensor_id": "s-9", "time": 4.0, "detections": 3}', None, "rest")
+    err = r.result(timeout=10).error
+    assert err is not None
+    assert (err["sensor_id"], err["time"], err["error"]) == ("s-9", 4.0, "invalid_batch")
+    assert err["detail"] == "detections: not a list"
+    r = engine.submit(b"\xff\xfe garbage", None, "rest")
+    err = r.result(timeout=10).error
+    assert err is not None and err["sensor_id"] == "unknown" and err["time"] is None
+
+
+def test_too_many_detections(sink: ListSink, scans: list[Any]) -> None:
+    eng = Engine(sink=sink, ingest=IngestConfig(max_detections_per_batch=3))
+    eng.start()
+    try:
+        r = eng.submit(_payload(scans[0]), "radar-1", "test").result(timeout=10)
+        assert r.error is not None and r.error["error"] == "too_many_detections"
+        assert "more than ingest.max_detections_per_batch = 3" in r.error["detail"]
+        assert eng.seq == 0
+    finally:
+        eng.stop()
+
+
+def test_reorder_window_puts_late_batches_in_order(sink: ListSink, scans: list[Any]) -> None:
+    eng = Engine(sink=sink, ingest=IngestConfig(reorder_window=1.5))
+    eng.start()
+    try:
+        order = [0, 2, 1, 3, 5, 4, 6, 7]
+        futures = [eng.submit(_payload(scans[i]), "radar-1", "t") for i in order]
+        # held batches wait for newer times, or W seconds of wall time
+        results = [f.result(timeout=10) for f in futures]
+        assert all(r.accepted for r in results), [r.error for r in results]
+        assert [r["time"] for r in sink.tracks] == [float(i) for i in range(8)]
+        # older than the last processed time: still out of sequence
+        late = eng.submit(_payload(scans[2]), "radar-1", "t").result(timeout=10)
+        assert late.error is not None and late.error["error"] == "out_of_sequence"
+    finally:
+        eng.stop()
+
+
+def test_reorder_window_releases_after_wall_time(sink: ListSink, scans: list[Any]) -> None:
+    eng = Engine(sink=sink, ingest=IngestConfig(reorder_window=0.3))
+    eng.start()
+    try:
+        t0 = time.monotonic()
+        fut = eng.submit(_payload(scans[0]), "radar-1", "t")
+        time.sleep(0.1)
+        assert not fut.done() and eng.stats.snapshot()["held_for_reorder"] == 1
+        assert fut.result(timeout=5).accepted
+        assert 0.25 <= time.monotonic() - t0 < 2.0
+    finally:
+        eng.stop()
+
+
+def test_config_patch_applies_on_next_batch_and_saves(
+    tmp_path: Path, sink: ListSink, scans: list[Any]
+) -> None:
+    path = tmp_path / "conf" / "tracker.json"
+    eng = Engine(sink=sink, config_file=path)
+    eng.start()
+    try:
+        _run(eng, [_payload(scans[0])])
+        doc = eng.patch_config(
+            {"measurement": {"position_std": 7.0}, "ingest": {"max_detections_per_batch": 5}}
+        )
+        assert doc["measurement"]["position_std"] == 7.0
+        assert eng.config_document() == doc
+        assert orjson.loads(path.read_bytes()) == doc
+        loaded = load_config_file(path, IngestConfig())
+        assert loaded is not None and loaded[0].measurement.position_std == 7.0
+        r = eng.submit(_payload(scans[1]), "radar-1", "t").result(timeout=10)
+        assert r.error is not None and r.error["error"] == "too_many_detections"
+        assert eng._pipeline.config.measurement.position_std == 7.0
+        # invalid: nothing changes, not even the file
+        saved = path.read_bytes()
+        with pytest.raises(ConfigError, match=r"track_management\.pd"):
+            eng.patch_config({"track_management": {"pd": 1.5}})
+        with pytest.raises(ConfigError, match=r"ingest\.reorder_window"):
+            eng.patch_config({"ingest": {"reorder_window": -1}})
+        with pytest.raises(ConfigError, match="unknown"):
+            eng.replace_config({"nonsense": {}})
+        assert path.read_bytes() == saved and eng.config_document() == doc
+        # PUT replaces; missing fields take their defaults; null in PATCH resets
+        doc = eng.replace_config({"gating": {"gate_probability": 0.999}})
+        assert doc["measurement"]["position_std"] == TrackerConfig().measurement.position_std
+        assert doc["ingest"] == IngestConfig().model_dump()
+        doc = eng.patch_config({"gating": {"gate_probability": None}})
+        assert doc == eng.config_document()
+        assert doc["gating"]["gate_probability"] == TrackerConfig().gating.gate_probability
+    finally:
+        eng.stop()
+
+
+def test_merge_patch() -> None:
+    assert merge_patch({"a": {"b": 1, "c": 2}}, {"a": {"b": None, "d": 3}}) == {
+        "a": {"c": 2, "d": 3}
+    }
+    assert merge_patch({"a": 1}, {"a": [1, 2]}) == {"a": [1, 2]}
+
+
+class SlowPipeline(TrackingPipeline):
+    """The real pipeline, made slow to fill the queue."""
+
+    def process(self, scan: Scan) -> StepResult:
+        time.sleep(0.2)
+        return super().process(scan)
+
+
+def test_overload_drops_are_counted_and_reported(sink: ListSink, scans: list[Any]) -> None:
+    eng = Engine(sink=sink, queue_size=1, put_timeout=0.05, pipeline_factory=SlowPipeline)
+    eng.start()
+    try:
+        futures = [eng.submit(_payload(s), "radar-1", "t") for s in scans[:5]]
+        results = [f.result(timeout=10) for f in futures]
+        dropped = [r for r in results if r.error and r.error["error"] == "overloaded"]
+        assert dropped, "a 1-slot queue behind a slow tracker must overflow"
+        stats = eng.stats.snapshot()
+        assert stats["batches_dropped"] == len(dropped)
+        assert stats["batches_received"] == 5
+        assert stats["batches_processed"] + len(dropped) == 5
+        assert sum(1 for _, e in sink.errors if e["error"] == "overloaded") == len(dropped)
+    finally:
+        eng.stop()
+
+
+def test_stop_is_quick_and_final(sink: ListSink, scans: list[Any]) -> None:
+    eng = Engine(sink=sink, pipeline_factory=SlowPipeline, stop_drain_seconds=0.3)
+    eng.start()
+    futures = [eng.submit(_payload(s), "radar-1", "t") for s in scans[:20]]
+    time.sleep(0.05)
+    t0 = time.monotonic()
+    eng.stop()
+    assert time.monotonic() - t0 < 2.0
+    assert not eng.running
+    results = [f.result(timeout=1) for f in futures]  # every future resolved
+    assert any(r.accepted for r in results)
+    assert any(r.error and r.error["error"] == "overloaded" for r in results)
+    after = eng.submit(_payload(scans[25]), "radar-1", "t").result(timeout=1)
+    assert after.error is not None and after.error["error"] == "overloaded"
+
+
+def test_concurrent_submitters(engine: Engine, scans: list[Any]) -> None:
+    """Submitting from several threads at once loses nothing."""
+    results: list[IngestResult] = []
+    lock = threading.Lock()
+
+    def send(part: list[Any]) -> None:
+        for s in part:
+            r = engine.submit(_payload(s, sensor_id=f"s{threading.get_ident() % 1000}"), None, "t")
+            with lock:
+                results.append(r.result(timeout=30))
+
+    threads = [threading.Thread(target=send, args=(scans[i::4],)) for i in range(4)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join(60)
+    assert len(results) == len(scans)
+    stats = engine.stats.snapshot()
+    assert stats["batches_received"] == len(scans)
+    assert stats["batches_processed"] + stats["batches_rejected"] == len(scans)
+
+
+class BrokenPipeline(TrackingPipeline):
+    """The real pipeline, failing on one batch time (a stand-in for a tracker bug)."""
+
+    def process(self, scan: Scan) -> StepResult:
+        if scan.time == 3.0:
+            raise RuntimeError("boom")
+        return super().process(scan)
+
+
+def test_a_tracker_failure_is_reported_and_the_worker_survives(
+    sink: ListSink, scans: list[Any]
+) -> None:
+    eng = Engine(sink=sink, pipeline_factory=BrokenPipeline)
+    eng.start()
+    try:
+        results = _run(eng, [_payload(s) for s in scans[:6]])
+        assert [r.accepted for r in results] == [True, True, True, False, True, True]
+        err = results[3].error
+        assert err is not None and err["error"] == "internal_error" and "boom" in err["detail"]
+        assert eng.running and eng.seq == 5
+    finally:
+        eng.stop()

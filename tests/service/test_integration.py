@@ -1,0 +1,465 @@
+"""The real service (uvicorn in this process, a real Zenoh peer on a loopback port) driven from
+a second Zenoh session and over HTTP: tracks out over the subscriber, the queryable, the
+liveliness token and REST; bad input; configuration; metrics."""
+
+from __future__ import annotations
+
+import json
+import re
+import time
+from typing import Any
+
+import httpx
+import numpy as np
+import orjson
+import pytest
+import zenoh
+
+from clients.scenarios.multitarget import reference_scenario, simulate
+from tests.conftest import RunningService
+
+from .helpers import (
+    Collector,
+    check_report,
+    check_track,
+    declare_publisher,
+    match_truth,
+    wait_until,
+)
+
+pytestmark = pytest.mark.timeout(120)
+
+SCANS = simulate(reference_scenario(7))
+
+
+def _publish(peer: zenoh.Session, scans: list[Any], prefix: str = "tracking") -> None:
+    pubs: dict[str, zenoh.Publisher] = {}
+    for scan in scans:
+        key = f"{prefix}/detections/{scan.sensor_id}"
+        if key not in pubs:
+            pubs[key] = declare_publisher(peer, key)
+        pubs[key].put(orjson.dumps(scan.to_batch()))
+    for pub in pubs.values():
+        pub.undeclare()
+
+
+def test_tracks_over_zenoh_queryable_liveliness_and_rest(
+    service: RunningService, peer: zenoh.Session
+) -> None:
+    reports = Collector(peer, "tracking/tracks")
+    errors = Collector(peer, "tracking/errors/**")
+    try:
+        n = 25
+        _publish(peer, SCANS[:n])
+        got = reports.wait_for(n, timeout=30)
+        assert len(got) == n
+        assert all(key == "tracking/tracks" for key, _ in got)
+        published = reports.json()
+        assert [r["seq"] for r in published] == list(range(1, n + 1))
+        assert [r["time"] for r in published] == [s.time for s in SCANS[:n]]
+        for rep in published:
+            check_report(rep)
+        last = published[-1]
+
+        # the confirmed tracks are the targets
+        truth = SCANS[n - 1].truth_states
+        matched, errs = match_truth(last["tracks"], truth)
+        assert matched >= 0.9 * len(truth), (matched, len(truth))
+        assert len(last["tracks"]) <= len(truth) + 3
+        assert np.median(errs) < 10.0
+
+        # the queryable answers the latest report, filters by selector parameters
+        replies = list(peer.get("tracking/state/tracks", timeout=5))
+        assert len(replies) == 1 and replies[0].ok is not None
+        assert str(replies[0].ok.key_expr) == "tracking/state/tracks"
+        assert str(replies[0].ok.encoding).startswith("application/json")
+        assert orjson.loads(replies[0].ok.payload.to_bytes()) == last
+        replies = list(peer.get("tracking/state/tracks?status=all", timeout=5))
+        assert replies[0].ok is not None
+        every = orjson.loads(replies[0].ok.payload.to_bytes())
+        assert len(every["tracks"]) > len(last["tracks"])
+        assert {t["status"] for t in every["tracks"]} == {"confirmed", "tentative"}
+
+        # the liveliness token
+        alive = [r.ok for r in peer.liveliness().get("tracking/alive/**", timeout=5)]
+        instance = service.app.state.settings.instance_id
+        assert [str(s.key_expr) for s in alive if s is not None] == [f"tracking/alive/{instance}"]
+
+        # REST: the same report, byte for byte when unfiltered
+        with httpx.Client(base_url=service.url, timeout=10) as http:
+            r = http.get("/api/v1/tracks")
+            assert r.status_code == 200
+            assert r.headers["content-type"] == "application/json"
+            assert r.json() == last
+            r = http.get("/api/v1/tracks", params={"status": "all"})
+            assert r.json()["tracks"] == every["tracks"]
+            for t in r.json()["tracks"]:
+                check_track(t)
+            r = http.get("/api/v1/tracks", params={"kind": "individual"})
+            assert r.json()["tracks"] == last["tracks"]
+            r = http.get("/api/v1/tracks", params={"kind": "formation,extended"})
+            assert r.json()["tracks"] == [] and r.json()["seq"] == n
+            tentative = [t for t in every["tracks"] if t["status"] == "tentative"]
+            r = http.get("/api/v1/tracks", params={"status": "tentative"})
+            assert r.json()["tracks"] == tentative
+            assert http.get("/api/v1/tracks", params={"status": "bogus"}).status_code == 422
+            one = last["tracks"][0]
+            assert http.get(f"/api/v1/tracks/{one['id']}").json() == one
+            assert http.get(f"/api/v1/tracks/{tentative[0]['id']}").json() == tentative[0]
+            r = http.get("/api/v1/tracks/T999999")
+            assert r.status_code == 404
+            stats = http.get("/api/v1/stats").json()
+            assert stats["batches_received"] == n and stats["batches_processed"] == n
+            assert stats["seq"] == n and stats["last_time"] == SCANS[n - 1].time
+            assert stats["detections_processed"] == sum(s.z.shape[0] for s in SCANS[:n])
+            assert stats["tracks_confirmed"] == len(last["tracks"])
+            assert stats["processing_ms"]["p50"] > 0
+        assert errors.items == []
+    finally:
+        reports.close()
+        errors.close()
+
+
+def _bad_inputs(t: float) -> list[tuple[str, str, bytes, str]]:
+    """(reason, key's sensor id, payload, text in the detail)"""
+    good = SCANS[0].to_batch()
+    dets = good["detections"]
+    nan = orjson.dumps({**good, "time": t}).replace(orjson.dumps(dets[3]["x"]), b"NaN", 1)
+    return [
+        ("invalid_json", "radar-1", b'{"sensor_id": "radar-1", ', "invalid JSON"),
+        (
+            "invalid_batch",
+            "radar-1",
+            orjson.dumps({"sensor_id": "radar-1", "time": t}),
+            "detections: missing",
+        ),
+        ("invalid_batch", "radar-1", nan, "detections[3].x: not a finite number"),
+        (
+            "invalid_batch",
+            "radar-1",
+            orjson.dumps(
+                {
+                    **good,
+                    "time": t,
+                    "detections": [{"x": 1.0, "y": 2.0, "cov": [[1.0, 0.0], [0.0, -4.0]]}],
+                }
+            ),
+            "detections[0].cov: not symmetric positive definite",
+        ),
+        (
+            "invalid_batch",
+            "radar-1",
+            orjson.dumps({**good, "time": t, "extra": 1}),
+            "extra: unknown field",
+        ),
+        ("sensor_mismatch", "radar-9", orjson.dumps({**good, "time": t}), "radar-9"),
+        ("out_of_sequence", "radar-1", orjson.dumps({**good, "time": 0.0}), "older"),
+    ]
+
+
+def test_bad_input_over_zenoh_is_reported_and_changes_nothing(
+    service: RunningService, peer: zenoh.Session
+) -> None:
+    errors = Collector(peer, "tracking/errors/**")
+    reports = Collector(peer, "tracking/tracks")
+    try:
+        _publish(peer, SCANS[:8])
+        reports.wait_for(8)
+        t = SCANS[8].time
+        bad = _bad_inputs(t)
+        with httpx.Client(base_url=service.url, timeout=10) as http:
+            before = http.get("/api/v1/tracks", params={"status": "all"}).content
+            for i, (reason, key_sensor, payload, detail) in enumerate(bad, start=1):
+                pub = declare_publisher(peer, f"tracking/detections/{key_sensor}")
+                pub.put(payload)
+                got = errors.wait_for(i)
+                key, data = got[-1]
+                assert key == f"tracking/errors/{key_sensor}"
+                report = orjson.loads(data)
+                assert set(report) == {"sensor_id", "time", "error", "detail", "received_bytes"}
+                assert report["error"] == reason, report
+                assert detail in report["detail"], report
+                assert report["sensor_id"] == key_sensor
+                assert report["received_bytes"] == len(payload)
+                pub.undeclare()
+                stats = http.get("/api/v1/stats").json()
+                assert stats["rejected_by_reason"].get(reason, 0) >= 1
+                assert http.get("/api/v1/tracks", params={"status": "all"}).content == before
+            stats = http.get("/api/v1/stats").json()
+            assert stats["batches_rejected"] == len(bad)
+            assert stats["batches_processed"] == 8
+            assert len(reports.items) == 8
+            # still working: the next good batch is processed
+            _publish(peer, SCANS[8:9])
+            reports.wait_for(9)
+            assert reports.json()[-1]["seq"] == 9
+            metrics = http.get("/metrics").text
+            assert 'tracker_batches_rejected_total{reason="invalid_batch"} 4' in metrics
+            assert "tracker_batches_processed_total 9" in metrics
+    finally:
+        errors.close()
+        reports.close()
+
+
+def test_rest_ingest(service: RunningService, peer: zenoh.Session) -> None:
+    errors = Collector(peer, "tracking/errors/**")
+    try:
+        with httpx.Client(base_url=service.url, timeout=10) as http:
+            for i, scan in enumerate(SCANS[:4], start=1):
+                r = http.post("/api/v1/detections", content=orjson.dumps(scan.to_batch()))
+                assert r.status_code == 202, r.text
+                assert r.json() == {"accepted": True, "seq": i}
+            assert http.get("/api/v1/tracks").json()["seq"] == 4
+            bad = {**SCANS[4].to_batch(), "pd": 2}
+            r = http.post("/api/v1/detections", content=orjson.dumps(bad))
+            assert r.status_code == 422
+            assert r.json()["error"] == "invalid_batch"
+            assert r.json()["detail"] == "pd: must be <= 1.0"
+            r = http.post("/api/v1/detections", content=b"nope")
+            assert r.status_code == 422 and r.json()["error"] == "invalid_json"
+            old = SCANS[1].to_batch()
+            r = http.post("/api/v1/detections", content=orjson.dumps(old))
+            assert r.status_code == 422 and r.json()["error"] == "out_of_sequence"
+            assert http.get("/api/v1/tracks").json()["seq"] == 4
+            stats = http.get("/api/v1/stats").json()
+            assert stats["batches_received"] == 7
+            assert stats["rejected_by_reason"] == {
+                "invalid_batch": 1,
+                "invalid_json": 1,
+                "out_of_sequence": 1,
+            }
+        got = errors.wait_for(3)
+        assert [k for k, _ in got] == [
+            "tracking/errors/radar-1",
+            "tracking/errors/unknown",
+            "tracking/errors/radar-1",
+        ]
+    finally:
+        errors.close()
+
+
+def test_rest_config(service: RunningService, peer: zenoh.Session) -> None:
+    errors = Collector(peer, "tracking/errors/**")
+    try:
+        with httpx.Client(base_url=service.url, timeout=10) as http:
+            doc = http.get("/api/v1/config").json()
+            assert doc["ingest"] == {"max_detections_per_batch": 10000, "reorder_window": 0.0}
+            assert "track_management" in doc and "measurement" in doc
+            patch = {"ingest": {"max_detections_per_batch": 10}}
+
+            r = http.patch("/api/v1/config", json=patch)
+            assert r.status_code == 401
+            assert r.headers["www-authenticate"].startswith("Bearer")
+            r = http.put("/api/v1/config", json=doc, headers={"Authorization": "Bearer wrong"})
+            assert r.status_code == 401 and "www-authenticate" in r.headers
+            r = http.patch("/api/v1/config", json=patch, headers={"Authorization": "Basic x"})
+            assert r.status_code == 401
+
+            for invalid in (
+                {"track_management": {"pd": 0}},
+                {"ingest": {"max_detections_per_batch": 0}},
+                {"motion": {"models": ["cv", "xx"]}},
+                {"nonsense": 1},
+            ):
+                r = http.patch("/api/v1/config", json=invalid, headers=service.auth)
+                assert r.status_code == 422, invalid
+                assert isinstance(r.json()["detail"], str)
+                assert http.get("/api/v1/config").json() == doc
+            r = http.patch("/api/v1/config", json=invalid, headers=service.auth)
+            assert "nonsense" in r.json()["detail"]
+            r = http.patch(
+                "/api/v1/config", json={"track_management": {"pd": 2}}, headers=service.auth
+            )
+            assert r.json()["detail"].startswith("track_management.pd")
+            r = http.put("/api/v1/config", content=b"{", headers=service.auth)
+            assert r.status_code == 422
+
+            # PATCH is effective on the next batch
+            _publish(peer, SCANS[:2])
+            wait_until(lambda: service.engine.seq == 2)
+            r = http.patch("/api/v1/config", json=patch, headers=service.auth)
+            assert r.status_code == 200
+            assert r.json()["ingest"]["max_detections_per_batch"] == 10
+            assert http.get("/api/v1/config").json() == r.json()
+            _publish(peer, SCANS[2:3])
+            err = orjson.loads(errors.wait_for(1)[0][1])
+            assert err["error"] == "too_many_detections"
+            assert service.engine.seq == 2
+
+            r = http.patch(
+                "/api/v1/config",
+                json={
+                    "measurement": {"position_std": 4.0},
+                    "ingest": {"max_detections_per_batch": None},
+                },
+                headers=service.auth,
+            )
+            assert r.status_code == 200 and r.json()["ingest"]["max_detections_per_batch"] == 10000
+            _publish(peer, SCANS[3:4])
+            wait_until(lambda: service.engine.seq == 3)
+            assert service.engine._pipeline.config.measurement.position_std == 4.0
+
+            # PUT replaces the whole document
+            r = http.put("/api/v1/config", json={}, headers=service.auth)
+            assert r.status_code == 200 and r.json() == doc
+    finally:
+        errors.close()
+
+
+_LABEL = r'[a-zA-Z_][a-zA-Z0-9_]*="(?:[^"\\\n]|\\[\\"n])*"'
+PROM_LINE = re.compile(
+    rf"^(?P<name>[a-zA-Z_:][a-zA-Z0-9_:]*)(\{{(?P<labels>{_LABEL}(,{_LABEL})*)\}})? "
+    r"(?P<value>\S+)$"
+)
+
+
+def parse_prometheus(text: str) -> dict[str, float]:
+    """A strict little parser of the text format: HELP/TYPE before samples, valid names."""
+    samples: dict[str, float] = {}
+    typed: dict[str, str] = {}
+    for line in text.splitlines():
+        if not line:
+            continue
+        if line.startswith("# HELP "):
+            continue
+        if line.startswith("# TYPE "):
+            _, _, name, kind = line.split(" ", 3)
+            assert kind in ("counter", "gauge", "summary", "histogram", "untyped"), line
+            typed[name] = kind
+            continue
+        assert not line.startswith("#"), line
+        m = PROM_LINE.match(line)
+        assert m, f"not a sample line: {line!r}"
+        name = m["name"]
+        base = re.sub(r"_(sum|count)$", "", name)
+        assert name in typed or base in typed, f"{name} has no TYPE"
+        if typed.get(name) == "counter":
+            assert name.endswith("_total"), name
+        samples[name + ((m["labels"] and "{" + m["labels"] + "}") or "")] = float(m["value"])
+    return samples
+
+
+def test_health_metrics_and_docs(service: RunningService, peer: zenoh.Session) -> None:
+    _publish(peer, SCANS[:3])
+    wait_until(lambda: service.engine.seq == 3)
+    with httpx.Client(base_url=service.url, timeout=10) as http:
+        assert http.get("/health").json() == {"status": "ok"}
+        r = http.get("/metrics")
+        assert r.status_code == 200 and r.headers["content-type"].startswith("text/plain")
+        samples = parse_prometheus(r.text)
+        assert samples["tracker_batches_received_total"] == 3
+        assert samples["tracker_batches_processed_total"] == 3
+        assert samples["tracker_processing_seconds_count"] == 3
+        assert samples['tracker_processing_seconds{quantile="0.99"}'] > 0
+        assert samples['tracker_tracks{status="confirmed"}'] >= 0
+        spec = http.get("/openapi.json").json()
+        for path in (
+            "/health",
+            "/api/v1/tracks",
+            "/api/v1/tracks/{track_id}",
+            "/api/v1/detections",
+            "/api/v1/config",
+            "/api/v1/stats",
+            "/metrics",
+        ):
+            assert path in spec["paths"], path
+        schemas = spec["components"]["schemas"]
+        for name in (
+            "DetectionBatchIn",
+            "DetectionIn",
+            "TrackOut",
+            "ErrorReportOut",
+            "ConfigDocument",
+        ):
+            assert name in schemas, name
+        assert json.dumps(spec).count("#/components/schemas/") > 5
+        assert http.get("/docs").status_code == 200
+
+
+def test_empty_service_answers(service: RunningService, peer: zenoh.Session) -> None:
+    replies = list(peer.get("tracking/state/tracks", timeout=5))
+    assert replies[0].ok is not None
+    empty = orjson.loads(replies[0].ok.payload.to_bytes())
+    assert empty == {
+        "seq": 0,
+        "time": None,
+        "sensor_id": None,
+        "processing_ms": 0.0,
+        "tracks": [],
+        "deleted": [],
+    }
+    with httpx.Client(base_url=service.url, timeout=10) as http:
+        assert http.get("/api/v1/tracks").json() == empty
+        assert http.get("/api/v1/tracks", params={"status": "all"}).json() == empty
+
+
+def test_custom_prefix_and_reorder_window(service_factory: Any) -> None:
+    svc = service_factory(key_prefix="site/a", reorder_window=5.0)
+    from tests.conftest import open_peer
+
+    session = open_peer(svc.endpoint)
+    try:
+        reports = Collector(session, "site/a/tracks")
+        order = [0, 1, 3, 2, 4, 6, 5, 7, 8, 9, 10, 11, 12]
+        _publish(session, [SCANS[i] for i in order], prefix="site/a")
+        got = reports.wait_for(len(order) - 5, timeout=10)
+        times = [orjson.loads(p)["time"] for _, p in got]
+        assert times == sorted(times) and len(set(times)) == len(times)
+        with httpx.Client(base_url=svc.url, timeout=10) as http:
+            assert http.get("/api/v1/config").json()["ingest"]["reorder_window"] == 5.0
+            stats = http.get("/api/v1/stats").json()
+            assert stats["batches_rejected"] == 0
+            assert stats["held_for_reorder"] >= 1
+        reports.close()
+    finally:
+        session.close()
+
+
+def test_get_tracks_stays_fast_while_the_engine_is_busy(
+    service: RunningService, peer: zenoh.Session
+) -> None:
+    """GET /api/v1/tracks while a publisher sends batches as fast as the service takes them."""
+    import threading
+
+    stop = threading.Event()
+    scans = simulate(reference_scenario(11))
+
+    def blast() -> None:
+        pub = declare_publisher(peer, "tracking/detections/radar-1")
+        offset = 0.0
+        try:
+            while not stop.is_set():
+                for scan in scans:
+                    if stop.is_set():
+                        break
+                    batch = scan.to_batch()
+                    batch["time"] = scan.time + offset
+                    pub.put(orjson.dumps(batch))
+                offset += scans[-1].time + 1.0
+        finally:
+            pub.undeclare()
+
+    thread = threading.Thread(target=blast)
+    thread.start()
+    latencies = []
+    try:
+        with httpx.Client(base_url=service.url, timeout=10) as http:
+            wait_until(lambda: service.engine.seq > 20)
+            seq0 = service.engine.seq
+            t_end = time.monotonic() + 3.0
+            while time.monotonic() < t_end:
+                t0 = time.perf_counter()
+                r = http.get("/api/v1/tracks")
+                latencies.append(time.perf_counter() - t0)
+                assert r.status_code == 200
+            rate = (service.engine.seq - seq0) / 3.0
+    finally:
+        stop.set()
+        thread.join(30)
+    p50, p99 = np.percentile(latencies, [50, 99]) * 1000
+    print(
+        f"\nGET /api/v1/tracks: p50 {p50:.2f} ms, p99 {p99:.2f} ms over "
+        f"{len(latencies)} requests while processing {rate:.0f} batches/s"
+    )
+    assert rate > 50
+    assert p99 < 50.0, f"p99 {p99:.1f} ms"

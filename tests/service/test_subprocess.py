@@ -1,0 +1,333 @@
+"""``python -m service`` as a real process: start-up errors, SIGTERM, a restart that keeps the
+configuration, the generated token, and REST latency under load."""
+
+from __future__ import annotations
+
+import os
+import re
+import signal
+import subprocess
+import sys
+import time
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import httpx
+import numpy as np
+import orjson
+import pytest
+
+from clients.scenarios.multitarget import reference_scenario, simulate
+from tests.conftest import free_port, open_peer
+
+from .helpers import Collector, declare_publisher, wait_until
+
+pytestmark = pytest.mark.timeout(120)
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+class ServiceProcess:
+    def __init__(self, *args: str, env: dict[str, str] | None = None) -> None:
+        self.zport, self.hport = free_port(), free_port()
+        self.url = f"http://127.0.0.1:{self.hport}"
+        self.endpoint = f"tcp/127.0.0.1:{self.zport}"
+        full_env = {k: v for k, v in os.environ.items() if not k.startswith("TRACKER_")}
+        full_env.update(env or {})
+        self.proc = subprocess.Popen(
+            [
+                sys.executable,
+                "-m",
+                "service",
+                "--zenoh-listen",
+                self.endpoint,
+                "--http-port",
+                str(self.hport),
+                *args,
+            ],
+            cwd=ROOT,
+            env=full_env,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+        )
+
+    def wait_ready(self, timeout: float = 20.0) -> None:
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            if self.proc.poll() is not None:
+                raise AssertionError(f"service exited: {self.proc.communicate()}")
+            try:
+                if httpx.get(self.url + "/health", timeout=1).status_code == 200:
+                    return
+            except httpx.HTTPError:
+                pass
+            time.sleep(0.05)
+        raise AssertionError("service did not become ready")
+
+    def terminate(self, timeout: float = 5.0) -> tuple[int, float, str, str]:
+        t0 = time.monotonic()
+        self.proc.send_signal(signal.SIGTERM)
+        out, err = self.proc.communicate(timeout=timeout)
+        return self.proc.returncode, time.monotonic() - t0, out, err
+
+    def kill(self) -> None:
+        if self.proc.poll() is None:
+            self.proc.kill()
+            self.proc.communicate(timeout=5)
+
+
+@pytest.fixture
+def processes() -> Iterator[list[ServiceProcess]]:
+    procs: list[ServiceProcess] = []
+    try:
+        yield procs
+    finally:
+        for p in procs:
+            p.kill()
+
+
+def _start(procs: list[ServiceProcess], *args: str, **kw: Any) -> ServiceProcess:
+    p = ServiceProcess(*args, **kw)
+    procs.append(p)
+    p.wait_ready()
+    return p
+
+
+def test_sigterm_exits_zero_quickly_with_zenoh_closed(processes: list[ServiceProcess]) -> None:
+    svc = _start(processes, "--api-token", "tok", "--log-level", "info")
+    session = open_peer(svc.endpoint)
+    try:
+        reports = Collector(session, "tracking/tracks")
+        pub = declare_publisher(session, "tracking/detections/radar-1")
+        for scan in simulate(reference_scenario(0))[:5]:
+            pub.put(orjson.dumps(scan.to_batch()))
+        reports.wait_for(5)
+        alive = list(session.liveliness().get("tracking/alive/**", timeout=5))
+        assert len(alive) == 1
+        code, elapsed, _, err = svc.terminate()
+        assert code == 0, err
+        assert elapsed < 3.0
+        assert "zenoh session closed" in err
+        assert "Traceback" not in err
+        # the liveliness token went away with the session
+        wait_until(
+            lambda: not list(session.liveliness().get("tracking/alive/**", timeout=1)),
+            timeout=5,
+            what="the liveliness token to disappear",
+        )
+        pub.undeclare()
+        reports.close()
+    finally:
+        session.close()
+
+
+def test_sigint_exits_zero(processes: list[ServiceProcess]) -> None:
+    svc = _start(processes, "--api-token", "tok")
+    svc.proc.send_signal(signal.SIGINT)
+    svc.proc.communicate(timeout=5)
+    assert svc.proc.returncode == 0
+
+
+def test_restart_keeps_the_configuration(processes: list[ServiceProcess], tmp_path: Path) -> None:
+    conf = tmp_path / "tracker.json"
+    svc = _start(processes, "--api-token", "tok", "--config-file", str(conf))
+    auth = {"Authorization": "Bearer tok"}
+    patch = {"gating": {"gate_probability": 0.999}, "ingest": {"reorder_window": 0.5}}
+    r = httpx.patch(svc.url + "/api/v1/config", json=patch, headers=auth)
+    assert r.status_code == 200
+    doc = r.json()
+    assert orjson.loads(conf.read_bytes()) == doc
+    assert [p.name for p in tmp_path.iterdir()] == ["tracker.json"]  # no temp files left
+    code, _, _, err = svc.terminate()
+    assert code == 0, err
+
+    again = _start(processes, "--api-token", "tok", "--config-file", str(conf))
+    got = httpx.get(again.url + "/api/v1/config").json()
+    assert got == doc
+    assert got["gating"]["gate_probability"] == 0.999
+    assert got["ingest"]["reorder_window"] == 0.5
+    code, _, _, err = again.terminate()
+    assert code == 0, err
+
+
+def test_generated_token_is_printed_once_and_works(processes: list[ServiceProcess]) -> None:
+    svc = _start(processes)
+    assert httpx.patch(svc.url + "/api/v1/config", json={}).status_code == 401
+    code, _, out, err = svc.terminate()
+    assert code == 0
+    lines = [line for line in (out + err).splitlines() if "API token" in line]
+    assert len(lines) == 1, lines
+    token = lines[0].rsplit(" ", 1)[-1]
+    assert len(token) >= 24
+
+    # and it is the one that works (check on a fresh run through the environment)
+    again = _start(processes, env={"TRACKER_API_TOKEN": token})
+    r = httpx.patch(
+        again.url + "/api/v1/config", json={}, headers={"Authorization": f"Bearer {token}"}
+    )
+    assert r.status_code == 200
+    code, _, out, err = again.terminate()
+    assert "API token" not in out + err
+
+
+@pytest.mark.parametrize(
+    ("args", "env", "message"),
+    [
+        (["--zenoh-mode", "mesh"], {}, "zenoh_mode"),
+        (["--http-port", "99999"], {}, "http_port"),
+        ([], {"TRACKER_HTTP_PORT": "eighty"}, "TRACKER_HTTP_PORT"),
+        ([], {"TRACKER_ZENOH_LISTEN": "localhost"}, "zenoh_listen"),
+        (["--reorder-window", "-1"], {}, "reorder_window"),
+        (["--key-prefix", "a/**"], {}, "key_prefix"),
+        (["--settings-file", "/nonexistent/settings.toml"], {}, "settings file"),
+        (["--no-such-flag"], {}, "unrecognized arguments"),
+    ],
+)
+def test_bad_settings_exit_2_without_traceback(
+    args: list[str], env: dict[str, str], message: str
+) -> None:
+    full_env = {k: v for k, v in os.environ.items() if not k.startswith("TRACKER_")}
+    full_env.update(env)
+    proc = subprocess.run(
+        [sys.executable, "-m", "service", *args],
+        cwd=ROOT,
+        env=full_env,
+        capture_output=True,
+        text=True,
+        timeout=30,
+    )
+    assert proc.returncode == 2, proc.stderr
+    assert message in proc.stderr
+    assert "Traceback" not in proc.stderr
+
+
+def test_bad_config_file_exits_2(tmp_path: Path) -> None:
+    conf = tmp_path / "bad.json"
+    conf.write_text('{"track_management": {"pd": 7}}')
+    proc = subprocess.run(
+        [sys.executable, "-m", "service", "--config-file", str(conf), "--api-token", "x"],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=30,
+    )
+    assert proc.returncode == 2
+    assert "track_management.pd" in proc.stderr and "Traceback" not in proc.stderr
+
+
+def test_settings_file_and_precedence(processes: list[ServiceProcess], tmp_path: Path) -> None:
+    settings = tmp_path / "settings.toml"
+    settings.write_text('key_prefix = "fromfile"\ninstance_id = "file-id"\napi_token = "ft"\n')
+    svc = _start(
+        processes,
+        "--settings-file",
+        str(settings),
+        "--instance-id",
+        "cli-id",
+        env={"TRACKER_KEY_PREFIX": "fromenv"},
+    )
+    session = open_peer(svc.endpoint)
+    try:
+        alive = [r.ok for r in session.liveliness().get("fromenv/alive/**", timeout=5)]
+        assert [str(s.key_expr) for s in alive if s is not None] == ["fromenv/alive/cli-id"]
+    finally:
+        session.close()
+    r = httpx.patch(svc.url + "/api/v1/config", json={}, headers={"Authorization": "Bearer ft"})
+    assert r.status_code == 200
+    assert svc.terminate()[0] == 0
+
+
+def test_zenoh_port_in_use_fails_clearly(processes: list[ServiceProcess]) -> None:
+    first = _start(processes, "--api-token", "x")
+    proc = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "service",
+            "--zenoh-listen",
+            first.endpoint,
+            "--http-port",
+            str(free_port()),
+            "--api-token",
+            "x",
+        ],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=30,
+    )
+    assert proc.returncode != 0
+    assert "cannot open the Zenoh session" in proc.stderr
+    assert first.terminate()[0] == 0
+
+
+def test_demo_shows_tracks_at_once(processes: list[ServiceProcess]) -> None:
+    svc = _start(
+        processes,
+        "--demo",
+        "--demo-summary-interval",
+        "1",
+        "--api-token",
+        "x",
+        "--log-level",
+        "info",
+    )
+    with httpx.Client(base_url=svc.url, timeout=5) as http:
+        wait_until(
+            lambda: len(http.get("/api/v1/tracks").json()["tracks"]) >= 40,
+            timeout=15,
+            what="the demo's confirmed tracks",
+        )
+        assert http.get("/api/v1/stats").json()["batches_rejected"] == 0
+    time.sleep(1.2)
+    code, elapsed, _, err = svc.terminate()
+    assert code == 0 and elapsed < 3.0
+    assert "demo: publishing the reference scenario" in err
+    assert re.search(r"demo: seq \d+ t=[\d.]+ s: \d+ confirmed tracks: T\d+ \(", err), err
+
+
+@pytest.mark.slow
+def test_rest_latency_under_max_rate_publishing(processes: list[ServiceProcess]) -> None:
+    """GET /api/v1/tracks p99 < 20 ms while the engine processes ~200 batches/s; the service,
+    the publisher and this client are three processes."""
+    svc = _start(processes, "--api-token", "x", "--log-level", "warning")
+    pub = subprocess.Popen(
+        [
+            sys.executable,
+            "-m",
+            "clients.publish",
+            "--rate",
+            "max",
+            "--scans",
+            "3000",
+            "-e",
+            svc.endpoint,
+            "-q",
+        ],
+        cwd=ROOT,
+        stdout=subprocess.DEVNULL,
+    )
+    try:
+        with httpx.Client(base_url=svc.url, timeout=5) as http:
+            wait_until(lambda: http.get("/api/v1/stats").json()["seq"] > 50, timeout=20)
+            s0 = http.get("/api/v1/stats").json()
+            latencies = []
+            t_end = time.monotonic() + 5.0
+            while time.monotonic() < t_end:
+                t0 = time.perf_counter()
+                assert http.get("/api/v1/tracks").status_code == 200
+                latencies.append(time.perf_counter() - t0)
+                time.sleep(0.002)
+            s1 = http.get("/api/v1/stats").json()
+        rate = (s1["batches_processed"] - s0["batches_processed"]) / (
+            s1["uptime_s"] - s0["uptime_s"]
+        )
+        p50, p99 = np.percentile(latencies, [50, 99]) * 1000
+        print(f"\np50 {p50:.2f} ms, p99 {p99:.2f} ms, {rate:.0f} batches/s")
+        assert rate > 150
+        assert p99 < 20.0
+    finally:
+        pub.kill()
+        pub.wait(5)
