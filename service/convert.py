@@ -87,21 +87,26 @@ def _floats(values: Iterable[Any]) -> list[float]:
 
 
 def track_to_dict(t: TrackSnapshot) -> dict[str, Any]:
-    """One Track as the contract's JSON object (optional fields only when present)."""
+    """One Track as the contract's JSON object (optional fields only when present).
+
+    Called for every confirmed track of every batch, so it does as little as it can: the
+    tracker's snapshots already hold plain Python numbers, and ``float``/``list`` only copy
+    what might be a numpy scalar or a tuple.
+    """
     out: dict[str, Any] = {
         "id": t.id,
         "kind": t.kind,
         "status": t.status,
         "time": float(t.time),
-        "position": _floats(t.position),
-        "velocity": _floats(t.velocity),
+        "position": [float(t.position[0]), float(t.position[1])],
+        "velocity": [float(t.velocity[0]), float(t.velocity[1])],
         "covariance": np.asarray(t.covariance, dtype=float).tolist(),
         "score": float(t.score),
         "hits": int(t.hits),
         "created": float(t.created),
         "updated": float(t.updated),
-        "model_probabilities": {str(k): float(v) for k, v in (t.model_probabilities or {}).items()},
-        "detection_ids": [str(d) for d in t.detection_ids if d is not None],
+        "model_probabilities": dict(t.model_probabilities or {}),
+        "detection_ids": [d for d in t.detection_ids if d is not None],
     }
     if t.extent is not None:
         out["extent"] = {

@@ -1,0 +1,162 @@
+"""The service under load: detection batches over Zenoh from another process, REST reads
+alongside.
+
+    python -m benchmarks.service_load [--rate 200] [--seconds 15]
+
+Starts ``tracker-service`` as a subprocess on free loopback ports, then runs the scenario
+publisher (``clients.publish``, reliable, ``CongestionControl.BLOCK``) as a second process:
+first paced at ``--rate`` batches per second, then as fast as the service takes them. Each
+batch is one scan of the reference scenario (50 targets at Pd 0.9 plus 10 clutter: about 55
+detections). During each phase this process reads ``GET /api/v1/tracks`` about 100 times a
+second and records the latency. Printed per phase: batches published, processed, rejected
+and dropped (from ``/api/v1/stats``), the processing rate, the tracker's time per batch and
+the REST latency percentiles, against the targets (≥ 200 batches/s, nothing lost, p99 < 20 ms).
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import re
+import signal
+import socket
+import subprocess
+import sys
+import threading
+import time
+from contextlib import closing
+from dataclasses import dataclass
+from pathlib import Path
+
+import httpx
+import numpy as np
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+def free_port() -> int:
+    with closing(socket.socket(socket.AF_INET, socket.SOCK_STREAM)) as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+@dataclass
+class Phase:
+    name: str
+    target_rate: float | None
+    published: int
+    processed: int
+    rejected: int
+    dropped: int
+    rate: float
+    tracker_p50: float
+    tracker_p99: float
+    get_ms: np.ndarray
+
+
+def sample_latency(client: httpx.Client, stop: threading.Event, out: list[float]) -> None:
+    while not stop.is_set():
+        t0 = time.perf_counter()
+        r = client.get("/api/v1/tracks")
+        out.append(1e3 * (time.perf_counter() - t0))
+        if r.status_code != 200:
+            raise RuntimeError(f"GET /api/v1/tracks answered {r.status_code}")
+        stop.wait(0.01)
+
+
+def run_phase(
+    name: str, client: httpx.Client, endpoint: str, scans: int, rate: float | None, offset: float
+) -> Phase:
+    s0 = client.get("/api/v1/stats").json()
+    cmd = [sys.executable, "-m", "clients.publish", "--scenario", "reference", "--scans",
+           str(scans), "-e", endpoint, "-q", "--time-offset", str(offset)]
+    cmd += ["--rate", "realtime", "--speed", str(rate)] if rate else ["--rate", "max"]
+    latencies: list[float] = []
+    stop = threading.Event()
+    sampler = threading.Thread(target=sample_latency, args=(client, stop, latencies), daemon=True)
+    sampler.start()
+    pub = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True, timeout=600, check=False)
+    stop.set()
+    if pub.returncode != 0:
+        raise RuntimeError(f"publisher failed ({pub.returncode}): {pub.stderr.strip()}")
+    # "published N batches in X s (...)": from its first put to the service's last answer
+    m = re.search(r"published (\d+) batches in ([\d.]+) s", pub.stdout)
+    if m is None:
+        raise RuntimeError(f"unexpected publisher output: {pub.stdout!r}")
+    elapsed_pub = float(m.group(2))
+    s1 = client.get("/api/v1/stats").json()
+    processed = s1["batches_processed"] - s0["batches_processed"]
+    sampler.join(1.0)
+    return Phase(
+        name=name,
+        target_rate=rate,
+        published=scans,
+        processed=processed,
+        rejected=s1["batches_rejected"] - s0["batches_rejected"],
+        dropped=s1["batches_dropped"] - s0["batches_dropped"],
+        rate=processed / elapsed_pub,
+        tracker_p50=s1["processing_ms"]["p50"],
+        tracker_p99=s1["processing_ms"]["p99"],
+        get_ms=np.asarray(latencies),
+    )
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m benchmarks.service_load", description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--rate", type=float, default=200.0, help="paced phase, batches/s")
+    parser.add_argument("--seconds", type=float, default=15.0, help="length of each phase")
+    args = parser.parse_args(argv)
+
+    http_port, zenoh_port = free_port(), free_port()
+    endpoint = f"tcp/127.0.0.1:{zenoh_port}"
+    env = dict(os.environ, PYTHONUNBUFFERED="1")
+    service = subprocess.Popen(
+        [sys.executable, "-m", "service", "--http-port", str(http_port), "--zenoh-listen",
+         endpoint, "--api-token", "bench", "--log-level", "warning"],
+        cwd=ROOT, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
+    )
+    try:
+        with httpx.Client(base_url=f"http://127.0.0.1:{http_port}", timeout=5.0) as client:
+            deadline = time.monotonic() + 30
+            while True:
+                try:
+                    if client.get("/health").status_code == 200:
+                        break
+                except httpx.TransportError:
+                    pass
+                if time.monotonic() > deadline or service.poll() is not None:
+                    raise RuntimeError("the service did not start")
+                time.sleep(0.1)
+            scans = int(args.rate * args.seconds)
+            phases = [
+                run_phase(f"paced {args.rate:.0f}/s", client, endpoint, scans, args.rate, 0.0),
+                run_phase("max rate", client, endpoint, scans, None, float(scans) + 10.0),
+            ]
+    finally:
+        service.send_signal(signal.SIGTERM)
+        try:
+            service.wait(10)
+        except subprocess.TimeoutExpired:
+            service.kill()
+
+    print("== the service under load: ~55-detection batches over Zenoh from another process,")
+    print("   GET /api/v1/tracks ~100/s from a third; service, publisher and reader share 2 cores")
+    print(f"   {'phase':<13}{'published':>10}{'processed':>10}{'rejected':>9}{'dropped':>8}"
+          f"{'batches/s':>10}{'tracker p50/p99 ms':>20}{'GET p50/p99/max ms':>22}")
+    for p in phases:
+        g = p.get_ms
+        print(f"   {p.name:<13}{p.published:>10}{p.processed:>10}{p.rejected:>9}{p.dropped:>8}"
+              f"{p.rate:>10.1f}{p.tracker_p50:>11.2f}/{p.tracker_p99:<8.2f}"
+              f"{np.percentile(g, 50):>9.2f}/{np.percentile(g, 99):.2f}/{g.max():.1f}")
+    ok_rate = phases[1].rate >= 200 and phases[0].rate >= 0.97 * args.rate
+    lost = any(p.processed != p.published or p.dropped or p.rejected for p in phases)
+    p99 = max(float(np.percentile(p.get_ms, 99)) for p in phases)
+    print(f"   targets: ≥ 200 batches/s ({'met' if ok_rate else 'NOT met'}), nothing lost "
+          f"({'met' if not lost else 'NOT met'}), GET p99 < 20 ms ({'met' if p99 < 20 else 'NOT met'}: "
+          f"{p99:.1f} ms)")
+    return 0 if ok_rate and not lost and p99 < 20 else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())
