@@ -68,8 +68,20 @@ def run_phase(
     name: str, client: httpx.Client, endpoint: str, scans: int, rate: float | None, offset: float
 ) -> Phase:
     s0 = client.get("/api/v1/stats").json()
-    cmd = [sys.executable, "-m", "clients.publish", "--scenario", "reference", "--scans",
-           str(scans), "-e", endpoint, "-q", "--time-offset", str(offset)]
+    cmd = [
+        sys.executable,
+        "-m",
+        "clients.publish",
+        "--scenario",
+        "reference",
+        "--scans",
+        str(scans),
+        "-e",
+        endpoint,
+        "-q",
+        "--time-offset",
+        str(offset),
+    ]
     cmd += ["--rate", "realtime", "--speed", str(rate)] if rate else ["--rate", "max"]
     latencies: list[float] = []
     stop = threading.Event()
@@ -102,8 +114,11 @@ def run_phase(
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m benchmarks.service_load", description=__doc__,
-                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = argparse.ArgumentParser(
+        prog="python -m benchmarks.service_load",
+        description=__doc__,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
     parser.add_argument("--rate", type=float, default=200.0, help="paced phase, batches/s")
     parser.add_argument("--seconds", type=float, default=15.0, help="length of each phase")
     args = parser.parse_args(argv)
@@ -112,9 +127,24 @@ def main(argv: list[str] | None = None) -> int:
     endpoint = f"tcp/127.0.0.1:{zenoh_port}"
     env = dict(os.environ, PYTHONUNBUFFERED="1")
     service = subprocess.Popen(
-        [sys.executable, "-m", "service", "--http-port", str(http_port), "--zenoh-listen",
-         endpoint, "--api-token", "bench", "--log-level", "warning"],
-        cwd=ROOT, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
+        [
+            sys.executable,
+            "-m",
+            "service",
+            "--http-port",
+            str(http_port),
+            "--zenoh-listen",
+            endpoint,
+            "--api-token",
+            "bench",
+            "--log-level",
+            "warning",
+        ],
+        cwd=ROOT,
+        env=env,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
+        text=True,
     )
     try:
         with httpx.Client(base_url=f"http://127.0.0.1:{http_port}", timeout=5.0) as client:
@@ -142,19 +172,25 @@ def main(argv: list[str] | None = None) -> int:
 
     print("== the service under load: ~55-detection batches over Zenoh from another process,")
     print("   GET /api/v1/tracks ~100/s from a third; service, publisher and reader share 2 cores")
-    print(f"   {'phase':<13}{'published':>10}{'processed':>10}{'rejected':>9}{'dropped':>8}"
-          f"{'batches/s':>10}{'tracker p50/p99 ms':>20}{'GET p50/p99/max ms':>22}")
+    print(
+        f"   {'phase':<13}{'published':>10}{'processed':>10}{'rejected':>9}{'dropped':>8}"
+        f"{'batches/s':>10}{'tracker p50/p99 ms':>20}{'GET p50/p99/max ms':>22}"
+    )
     for p in phases:
         g = p.get_ms
-        print(f"   {p.name:<13}{p.published:>10}{p.processed:>10}{p.rejected:>9}{p.dropped:>8}"
-              f"{p.rate:>10.1f}{p.tracker_p50:>11.2f}/{p.tracker_p99:<8.2f}"
-              f"{np.percentile(g, 50):>9.2f}/{np.percentile(g, 99):.2f}/{g.max():.1f}")
+        print(
+            f"   {p.name:<13}{p.published:>10}{p.processed:>10}{p.rejected:>9}{p.dropped:>8}"
+            f"{p.rate:>10.1f}{p.tracker_p50:>11.2f}/{p.tracker_p99:<8.2f}"
+            f"{np.percentile(g, 50):>9.2f}/{np.percentile(g, 99):.2f}/{g.max():.1f}"
+        )
     ok_rate = phases[1].rate >= 200 and phases[0].rate >= 0.97 * args.rate
     lost = any(p.processed != p.published or p.dropped or p.rejected for p in phases)
     p99 = max(float(np.percentile(p.get_ms, 99)) for p in phases)
-    print(f"   targets: ≥ 200 batches/s ({'met' if ok_rate else 'NOT met'}), nothing lost "
-          f"({'met' if not lost else 'NOT met'}), GET p99 < 20 ms ({'met' if p99 < 20 else 'NOT met'}: "
-          f"{p99:.1f} ms)")
+    print(
+        f"   targets: ≥ 200 batches/s ({'met' if ok_rate else 'NOT met'}), nothing lost "
+        f"({'met' if not lost else 'NOT met'}), "
+        f"GET p99 < 20 ms ({'met' if p99 < 20 else 'NOT met'}: {p99:.1f} ms)"
+    )
     return 0 if ok_rate and not lost and p99 < 20 else 1
 
 

@@ -34,13 +34,17 @@ class StoneSoupGNN:
         from stonesoup.types.state import GaussianState
         from stonesoup.updater.kalman import KalmanUpdater
 
-        transition = CombinedLinearGaussianTransitionModel([ConstantVelocity(q), ConstantVelocity(q)])
+        transition = CombinedLinearGaussianTransitionModel(
+            [ConstantVelocity(q), ConstantVelocity(q)]
+        )
         self.measurement_model = LinearGaussian(
             ndim_state=4, mapping=(0, 2), noise_covar=np.diag([sigma**2, sigma**2])
         )
         predictor = KalmanPredictor(transition)
         updater = KalmanUpdater(self.measurement_model)
-        hypothesiser = DistanceHypothesiser(predictor, updater, measure=Mahalanobis(), missed_distance=3)
+        hypothesiser = DistanceHypothesiser(
+            predictor, updater, measure=Mahalanobis(), missed_distance=3
+        )
         associator = GNNWith2DAssignment(hypothesiser)
         deleter = UpdateTimeStepsDeleter(time_steps_since_update=5)
         initiator = MultiMeasurementInitiator(
@@ -68,12 +72,17 @@ class StoneSoupGNN:
 
         timestamp = self._epoch + dt.timedelta(seconds=float(t))
         detections = {
-            Detection(np.asarray(p, dtype=float).reshape(2, 1), timestamp=timestamp,
-                      measurement_model=self.measurement_model)
+            Detection(
+                np.asarray(p, dtype=float).reshape(2, 1),
+                timestamp=timestamp,
+                measurement_model=self.measurement_model,
+            )
             for p in z
         }
         start = time.perf_counter()
         _, tracks = self.tracker.update_tracker(timestamp, detections)
         elapsed = time.perf_counter() - start
-        pos = np.array([[tr.state_vector[0, 0], tr.state_vector[2, 0]] for tr in tracks]).reshape(-1, 2)
+        pos = np.array([[tr.state_vector[0, 0], tr.state_vector[2, 0]] for tr in tracks]).reshape(
+            -1, 2
+        )
         return pos, elapsed

@@ -101,7 +101,9 @@ def run_stonesoup(scans: list, scenario: ScenarioConfig) -> RunResult:
     from benchmarks.stonesoup_gnn import StoneSoupGNN
 
     sensor = scenario.sensors[0]
-    tracker = StoneSoupGNN(q=scenario.q, sigma=sensor.sigma, velocity_std=2.0 * scenario.init_velocity_std)
+    tracker = StoneSoupGNN(
+        q=scenario.q, sigma=sensor.sigma, velocity_std=2.0 * scenario.init_velocity_std
+    )
     times, scores = [], []
     continuity = ContinuityCounter(gate=CONTINUITY_GATE)
     est = np.zeros((0, 2))
@@ -120,7 +122,10 @@ def run_stonesoup(scans: list, scenario: ScenarioConfig) -> RunResult:
 
 def bench_reference(seeds: int, with_stonesoup: bool) -> None:
     print("== reference scenario: 50 targets, 100 scans, T = 1 s, clutter 10/scan, Pd 0.9, σ 5 m")
-    print("   tracker time per scan (median over scans and seeds); mean GOSPA α=2 c=100 m p=2, scans 10-99")
+    print(
+        "   tracker time per scan (median over scans and seeds); "
+        "mean GOSPA α=2 c=100 m p=2, scans 10-99"
+    )
     rows: dict[str, list[RunResult]] = {}
     for seed in range(seeds):
         scenario = reference_scenario(seed)
@@ -135,7 +140,9 @@ def bench_reference(seeds: int, with_stonesoup: bool) -> None:
                 with_stonesoup = False
             else:
                 rows.setdefault(ss.name, []).append(ss)
-    print(f"   {'tracker':<24}{'median ms':>10}{'p90 ms':>9}{'GOSPA m':>9}{'breaks':>8}{'swaps':>7}")
+    print(
+        f"   {'tracker':<24}{'median ms':>10}{'p90 ms':>9}{'GOSPA m':>9}{'breaks':>8}{'swaps':>7}"
+    )
     medians = {}
     for name, runs in rows.items():
         all_times = [t for r in runs for t in r.times_ms]
@@ -149,10 +156,14 @@ def bench_reference(seeds: int, with_stonesoup: bool) -> None:
         )
     if len(medians) == 2:
         (m_ours, g_ours), (m_ss, g_ss) = medians.values()
-        print(f"   speed-up: Stone Soup / this tracker = {m_ss / m_ours:.0f}x; "
-              f"GOSPA this tracker − Stone Soup = {g_ours - g_ss:+.2f} m")
-    print("   targets: median ≤ 3 ms per scan; GOSPA no worse than Stone Soup's "
-          "(issue's reference measurement: 165 ms, 31.5 m)")
+        print(
+            f"   speed-up: Stone Soup / this tracker = {m_ss / m_ours:.0f}x; "
+            f"GOSPA this tracker − Stone Soup = {g_ours - g_ss:+.2f} m"
+        )
+    print(
+        "   targets: median ≤ 3 ms per scan; GOSPA no worse than Stone Soup's "
+        "(issue's reference measurement: 165 ms, 31.5 m)"
+    )
 
 
 def _scale_once(n_targets: int, n_scans: int, seed: int) -> tuple[float, float, float, int]:
@@ -186,7 +197,10 @@ def _scale_once(n_targets: int, n_scans: int, seed: int) -> tuple[float, float, 
 
 def bench_scale(targets: list[int], n_scans: int) -> None:
     print(f"== scale: 20 km x 20 km, 1,000 clutter detections/scan, Pd 0.9, {n_scans} scans")
-    print(f"   {'targets':>8}{'median ms':>11}{'p90 ms':>9}{'µs/target':>11}{'tracker MB':>12}{'confirmed':>11}")
+    print(
+        f"   {'targets':>8}{'median ms':>11}{'p90 ms':>9}{'µs/target':>11}"
+        f"{'tracker MB':>12}{'confirmed':>11}"
+    )
     for n in targets:
         med, p90, peak_mb, n_conf = _scale_once(n, n_scans, seed=1)
         print(f"   {n:>8}{med:>11.2f}{p90:>9.2f}{1e3 * med / n:>11.1f}{peak_mb:>12.1f}{n_conf:>11}")
@@ -196,7 +210,9 @@ def bench_scale(targets: list[int], n_scans: int) -> None:
 
 
 def bench_crb(runs: int, n_scans: int) -> None:
-    print(f"== accuracy vs posterior Cramér-Rao bound: one CV target, Pd 1, no clutter, {runs} runs")
+    print(
+        f"== accuracy vs posterior Cramér-Rao bound: one CV target, Pd 1, no clutter, {runs} runs"
+    )
     q, sigma, v_std, dt = 0.05, 5.0, 10.0, 1.0
     sensor = SensorSpec(pd=1.0, sigma=sigma, clutter_mean=0.0)
     config = TrackerConfig().merged(
@@ -210,8 +226,13 @@ def bench_crb(runs: int, n_scans: int) -> None:
     counts = np.zeros(n_scans)
     for r in range(runs):
         scenario = ScenarioConfig(
-            n_targets=1, n_scans=n_scans, dt=dt, init_velocity_std=v_std, q=q,
-            sensors=(sensor,), seed=10_000 + r,
+            n_targets=1,
+            n_scans=n_scans,
+            dt=dt,
+            init_velocity_std=v_std,
+            q=q,
+            sensors=(sensor,),
+            seed=10_000 + r,
         )
         pipeline = TrackingPipeline(config)
         for k, sim in enumerate(simulate(scenario)):
@@ -225,22 +246,32 @@ def bench_crb(runs: int, n_scans: int) -> None:
     F, Q = cv_matrices(dt, q)
     H = np.array([[1.0, 0, 0, 0], [0, 1.0, 0, 0]])
     R = sigma**2 * np.eye(2)
-    P0 = np.diag([sigma**2, sigma**2, v_std**2, v_std**2])  # the posterior after the first detection
+    P0 = np.diag(
+        [sigma**2, sigma**2, v_std**2, v_std**2]
+    )  # the posterior after the first detection
     bounds = pcrb_linear(F, Q, H, R, np.linalg.inv(P0), n_scans - 1)
     crb = np.concatenate([[math.sqrt(2) * sigma], np.sqrt(bounds[:, 0, 0] + bounds[:, 1, 1])])
     ratio = rmse / crb
     for k in (0, 1, 2, 5, 10, 20, n_scans - 1):
         if k < n_scans:
-            print(f"   scan {k:>3}: RMSE {rmse[k]:6.3f} m   PCRB {crb[k]:6.3f} m   ratio {ratio[k]:.3f}")
+            print(
+                f"   scan {k:>3}: RMSE {rmse[k]:6.3f} m   PCRB {crb[k]:6.3f} m"
+                f"   ratio {ratio[k]:.3f}"
+            )
     pooled = math.sqrt(np.mean(rmse[10:] ** 2)) / math.sqrt(np.mean(crb[10:] ** 2))
-    print(f"   scans 10-{n_scans - 1} pooled: RMSE / PCRB = {pooled:.3f} (target ≤ 1.10); "
-          f"per-scan ratios {ratio[10:].min():.3f}-{ratio[10:].max():.3f} "
-          f"(Monte Carlo spread ±{100 / math.sqrt(2 * runs):.1f} % per scan)")
+    print(
+        f"   scans 10-{n_scans - 1} pooled: RMSE / PCRB = {pooled:.3f} (target ≤ 1.10); "
+        f"per-scan ratios {ratio[10:].min():.3f}-{ratio[10:].max():.3f} "
+        f"(Monte Carlo spread ±{100 / math.sqrt(2 * runs):.1f} % per scan)"
+    )
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m benchmarks.tracking", description=__doc__,
-                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = argparse.ArgumentParser(
+        prog="python -m benchmarks.tracking",
+        description=__doc__,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
     parser.add_argument("which", choices=["reference", "scale", "crb", "all"])
     parser.add_argument("--seeds", type=int, default=3)
     parser.add_argument("--no-stonesoup", action="store_true")

@@ -13,10 +13,10 @@ from dataclasses import asdict, dataclass, field, fields, is_dataclass
 from typing import Any, get_type_hints
 
 __all__ = [
-    "MotionConfig",
-    "MeasurementConfig",
-    "InitiationConfig",
     "GatingConfig",
+    "InitiationConfig",
+    "MeasurementConfig",
+    "MotionConfig",
     "TrackManagementConfig",
     "TrackerConfig",
 ]

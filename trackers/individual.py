@@ -38,7 +38,7 @@ from trackers.types import Scan, StepResult, TrackSnapshot
 if TYPE_CHECKING:
     from trackers.pipeline import ResolutionCell
 
-__all__ = ["TrackArrays", "IndividualTracker"]
+__all__ = ["IndividualTracker", "TrackArrays"]
 
 KIND = "individual"
 
@@ -175,7 +175,9 @@ class IndividualTracker:
         n_old = len(tracks)
         tracks = tracks.concat(born)
 
-        status = sequential_test(tracks.score, tracks.peak, tracks.confirmed, t - tracks.updated, tm)
+        status = sequential_test(
+            tracks.score, tracks.peak, tracks.confirmed, t - tracks.updated, tm
+        )
         delete = status.delete
         delete[n_old:] = False  # a track is never deleted in the scan that starts it
         deleted_ids = tuple(tracks.ids[delete & tracks.confirmed].tolist())
@@ -225,7 +227,9 @@ class IndividualTracker:
         # Confirmed tracks choose first; tentative tracks share what they leave. A young track
         # with a wide velocity gate would otherwise take a confirmed target's detections.
         first = tracks.confirmed[ti]
-        sel = np.flatnonzero(first)[gnn_assign(ti[first], dj[first], gain[first], len(tracks), scan.size)]
+        sel = np.flatnonzero(first)[
+            gnn_assign(ti[first], dj[first], gain[first], len(tracks), scan.size)
+        ]
         taken = np.zeros(scan.size, dtype=bool)
         taken[dj[sel]] = True
         second = np.flatnonzero(~first & ~taken[dj])
@@ -269,7 +273,9 @@ class IndividualTracker:
         )
         return new, assigned
 
-    def _initiate(self, scan: Scan, free: np.ndarray, config: TrackerConfig, lam_fa: float) -> TrackArrays:
+    def _initiate(
+        self, scan: Scan, free: np.ndarray, config: TrackerConfig, lam_fa: float
+    ) -> TrackArrays:
         """A tentative track at each free detection: position z with covariance R, zero
         velocity and turn rate with the configured standard deviations."""
         idx = np.flatnonzero(free)
@@ -287,7 +293,10 @@ class IndividualTracker:
         L1 = initial_score(config.track_management.new_target_density, lam_fa)
         ids = _objects([f"T{next(self._next_id)}" for _ in range(n)])
         det_ids = _objects(
-            [() if scan.detection_ids[j] is None else (scan.detection_ids[j],) for j in idx.tolist()]
+            [
+                () if scan.detection_ids[j] is None else (scan.detection_ids[j],)
+                for j in idx.tolist()
+            ]
         )
         t = float(scan.time)
         return TrackArrays(

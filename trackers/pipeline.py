@@ -26,7 +26,7 @@ from trackers.config import TrackerConfig
 from trackers.individual import IndividualTracker
 from trackers.types import Scan, ScanRejected, StepResult, TrackSnapshot
 
-__all__ = ["ResolutionCell", "PeerOutput", "PeerTracker", "TrackingPipeline", "check_scan"]
+__all__ = ["PeerOutput", "PeerTracker", "ResolutionCell", "TrackingPipeline", "check_scan"]
 
 
 @dataclass(frozen=True)
@@ -150,8 +150,9 @@ class TrackingPipeline:
             time=scan.time,
             sensor_id=scan.sensor_id,
             deleted=tuple(deleted) + result.deleted,
-            snapshot=lambda confirmed_only: (peer_confirmed if confirmed_only else peer_all)
-            + result.snapshot(confirmed_only),
+            snapshot=lambda confirmed_only: (
+                (peer_confirmed if confirmed_only else peer_all) + result.snapshot(confirmed_only)
+            ),
         )
 
     def snapshot(self) -> tuple[TrackSnapshot, ...]:

@@ -25,10 +25,10 @@ import numpy as np
 from trackers.config import TrackManagementConfig
 
 __all__ = [
-    "initial_score",
-    "hit_increment",
-    "miss_increment",
     "StatusUpdate",
+    "hit_increment",
+    "initial_score",
+    "miss_increment",
     "sequential_test",
 ]
 
@@ -42,7 +42,9 @@ def initial_score(new_target_density: float, clutter_density: float) -> float:
     return float(np.log(new_target_density) - np.log(clutter_density))
 
 
-def hit_increment(pd: np.ndarray | float, log_likelihood: np.ndarray, clutter_density: float) -> np.ndarray:
+def hit_increment(
+    pd: np.ndarray | float, log_likelihood: np.ndarray, clutter_density: float
+) -> np.ndarray:
     """ΔL = ln P_D + ln g(z) − ln λ_fa."""
     return np.log(pd) + log_likelihood - np.log(clutter_density)
 

@@ -14,7 +14,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-__all__ = ["ScanRejected", "Scan", "TrackSnapshot", "StepResult", "Extent"]
+__all__ = ["Extent", "Scan", "ScanRejected", "StepResult", "TrackSnapshot"]
 
 
 class ScanRejected(ValueError):
@@ -63,7 +63,9 @@ class Scan:
         z = np.asarray(self.z, dtype=float).reshape(-1, 2)
         R = np.asarray(self.R, dtype=float).reshape(-1, 2, 2)
         if R.shape[0] != z.shape[0]:
-            raise ScanRejected("invalid_scan", f"{z.shape[0]} detections but {R.shape[0]} covariances")
+            raise ScanRejected(
+                "invalid_scan", f"{z.shape[0]} detections but {R.shape[0]} covariances"
+            )
         object.__setattr__(self, "z", z)
         object.__setattr__(self, "R", R)
         ids = tuple(self.detection_ids) if self.detection_ids else (None,) * z.shape[0]

@@ -422,5 +422,5 @@ def crossing_scenario(
         q=q,
         sensors=(SensorSpec(clutter_mean=clutter_mean),),
         seed=seed,
-        initial_states=tuple(tuple(float(v) for v in s) for s in states),
+        initial_states=tuple((float(a), float(b), float(c), float(d)) for a, b, c, d in states),
     )

@@ -16,14 +16,22 @@ Q, SIGMA, V_STD, DT = 0.05, 5.0, 10.0, 1.0
 def test_position_rmse_is_within_ten_percent_of_the_pcrb():
     runs, scans = 120, 30
     config = TrackerConfig().merged(
-        {"motion": {"q_cv": Q}, "initiation": {"velocity_std": V_STD},
-         "track_management": {"pd": 1.0 - 1e-9}}
+        {
+            "motion": {"q_cv": Q},
+            "initiation": {"velocity_std": V_STD},
+            "track_management": {"pd": 1.0 - 1e-9},
+        }
     )
     sq = np.zeros(scans)
     for r in range(runs):
         scenario = ScenarioConfig(
-            n_targets=1, n_scans=scans, dt=DT, init_velocity_std=V_STD, q=Q,
-            sensors=(SensorSpec(pd=1.0, sigma=SIGMA, clutter_mean=0.0),), seed=500 + r,
+            n_targets=1,
+            n_scans=scans,
+            dt=DT,
+            init_velocity_std=V_STD,
+            q=Q,
+            sensors=(SensorSpec(pd=1.0, sigma=SIGMA, clutter_mean=0.0),),
+            seed=500 + r,
         )
         pipeline = TrackingPipeline(config)
         for k, sim in enumerate(simulate(scenario)):

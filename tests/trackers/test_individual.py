@@ -1,5 +1,6 @@
 """The individual tracker on small scenes whose right answer is known."""
 
+import itertools
 import math
 
 import numpy as np
@@ -14,8 +15,15 @@ SIGMA = 5.0
 
 def scan_at(t, points, sensor="r1", pd=None, lam=None, sigma=SIGMA, ids=None):
     z = np.asarray(points, dtype=float).reshape(-1, 2)
-    return Scan(sensor, float(t), z, np.tile(sigma**2 * np.eye(2), (len(z), 1, 1)),
-                detection_ids=ids or (), pd=pd, clutter_density=lam)
+    return Scan(
+        sensor,
+        float(t),
+        z,
+        np.tile(sigma**2 * np.eye(2), (len(z), 1, 1)),
+        detection_ids=ids or (),
+        pd=pd,
+        clutter_density=lam,
+    )
 
 
 def config(**tm):
@@ -52,7 +60,7 @@ def test_confirmation_follows_the_score_thresholds():
         scores.append(t.score)
         assert (t.status == "confirmed") == any(s >= tm.confirm_threshold for s in scores)
     assert scores[0] == pytest.approx(math.log(1e-7 / 1e-6))
-    assert all(b > a for a, b in zip(scores, scores[1:], strict=False))
+    assert all(b > a for a, b in itertools.pairwise(scores))
     assert res.tracks[0].status == "confirmed"
 
 
@@ -75,8 +83,9 @@ def test_scan_pd_and_clutter_density_override_configuration():
 
 
 def test_confirmed_track_is_deleted_after_drop_from_peak_and_reported():
-    tr = IndividualTracker(config(pd=0.9, clutter_density=1e-6, delete_drop_from_peak=6.0,
-                                  max_coast_time=100.0))
+    tr = IndividualTracker(
+        config(pd=0.9, clutter_density=1e-6, delete_drop_from_peak=6.0, max_coast_time=100.0)
+    )
     for k in range(8):
         res = tr.step(scan_at(k, [0.0, 0.0]))
     assert res.confirmed()
@@ -124,7 +133,12 @@ def test_two_crossing_targets_keep_their_ids():
         b = np.array([-200.0 + 10 * k, 100.0 - 5 * k])
         res = tr.step(scan_at(k, np.stack([a, b]) + rng.normal(0, 2.0, (2, 2)), sigma=2.0))
         for t in res.confirmed():
-            who = "a" if np.linalg.norm(np.subtract(t.position, a)) < np.linalg.norm(np.subtract(t.position, b)) else "b"
+            who = (
+                "a"
+                if np.linalg.norm(np.subtract(t.position, a))
+                < np.linalg.norm(np.subtract(t.position, b))
+                else "b"
+            )
             if k < 17 or k > 23:  # away from the crossing itself
                 owner.setdefault(t.id, set()).add(who)
     assert len(owner) == 2
@@ -137,8 +151,14 @@ def test_two_sensors_fuse_into_one_track_per_target():
     for k in range(20):
         truth = np.array([[0.0 + 8 * k, 0.0], [500.0, 300.0 - 4 * k]])
         tr.step(scan_at(k, truth + rng.normal(0, 5.0, (2, 2)), sensor="a", sigma=5.0))
-        res = tr.step(scan_at(k + 0.5, truth + [[4, 0], [0, -2]] + rng.normal(0, 20.0, (2, 2)),
-                              sensor="b", sigma=20.0))
+        res = tr.step(
+            scan_at(
+                k + 0.5,
+                truth + np.array([[4.0, 0.0], [0.0, -2.0]]) + rng.normal(0, 20.0, (2, 2)),
+                sensor="b",
+                sigma=20.0,
+            )
+        )
     conf = res.confirmed()
     assert len(conf) == 2
     assert len(res.tracks) == 2

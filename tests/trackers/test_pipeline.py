@@ -48,7 +48,11 @@ def state(p):
     [
         (scan_at(float("nan"), [0, 0]), "invalid_scan", "time"),
         (scan_at(5.0, [[0, 0], [np.nan, 1]]), "invalid_scan", "detections[1]"),
-        (scan_at(5.0, [0, 0], R=np.array([[[1.0, 2.0], [2.0, 1.0]]])), "invalid_scan", "positive definite"),
+        (
+            scan_at(5.0, [0, 0], R=np.array([[[1.0, 2.0], [2.0, 1.0]]])),
+            "invalid_scan",
+            "positive definite",
+        ),
         (scan_at(5.0, [0, 0], R=np.array([[[1.0, 0.5], [0.4, 1.0]]])), "invalid_scan", "symmetric"),
         (scan_at(5.0, [0, 0], R=np.array([[[np.inf, 0], [0, 1.0]]])), "invalid_scan", "finite"),
         (scan_at(5.0, [0, 0], pd=0.0), "invalid_scan", "pd"),

@@ -37,8 +37,10 @@ def run(scenario: ScenarioConfig, config: TrackerConfig, first_scored: int = 10)
 
 def tuned(scenario: ScenarioConfig) -> TrackerConfig:
     return TrackerConfig().merged(
-        {"motion": {"q_cv": max(scenario.q, 0.01)},
-         "initiation": {"velocity_std": 2.0 * max(scenario.init_velocity_std, 5.0)}}
+        {
+            "motion": {"q_cv": max(scenario.q, 0.01)},
+            "initiation": {"velocity_std": 2.0 * max(scenario.init_velocity_std, 5.0)},
+        }
     )
 
 
@@ -61,7 +63,7 @@ def test_reference_scenario_with_default_configuration_still_tracks_everything()
 
 def test_crossing_targets_keep_their_tracks():
     scenario = crossing_scenario(n_targets=4, seed=3)
-    mean_gospa, missed, false, cont = run(scenario, tuned(scenario))
+    mean_gospa, _missed, _false, cont = run(scenario, tuned(scenario))
     assert cont.total_breaks == 0
     assert cont.total_swaps <= 2  # four tracks through one point at 30° spacing
     assert mean_gospa < 25.0
@@ -84,8 +86,14 @@ def test_two_sensors_are_fused():
     """Two sensors of different quality, interleaved in time, feed the same tracks."""
     sensors = (
         SensorSpec(sensor_id="radar-a", pd=0.8, sigma=5.0, clutter_mean=10.0),
-        SensorSpec(sensor_id="radar-b", pd=0.7, sigma=15.0, clutter_mean=20.0, time_offset=0.5,
-                   position=(1000.0, 0.0)),
+        SensorSpec(
+            sensor_id="radar-b",
+            pd=0.7,
+            sigma=15.0,
+            clutter_mean=20.0,
+            time_offset=0.5,
+            position=(1000.0, 0.0),
+        ),
     )
     scenario = replace(reference_scenario(5), n_targets=30, n_scans=60, sensors=sensors)
     mean_gospa, missed, false, cont = run(scenario, tuned(scenario), first_scored=20)

@@ -31,8 +31,9 @@ def test_wald_thresholds():
 
 
 def test_sequential_test_rules():
-    c = TrackManagementConfig(p_false_confirm=1e-4, p_true_delete=1e-2,
-                              delete_drop_from_peak=10.0, max_coast_time=5.0)
+    c = TrackManagementConfig(
+        p_false_confirm=1e-4, p_true_delete=1e-2, delete_drop_from_peak=10.0, max_coast_time=5.0
+    )
     score = np.array([10.0, -5.0, 0.0, 20.0, 20.0, 0.0])
     peak = np.array([10.0, 0.0, 0.0, 25.0, 35.0, 0.0])
     confirmed = np.array([False, False, False, True, True, False])

@@ -27,7 +27,9 @@ class PairClusters:
     groups: tuple[np.ndarray, ...]
 
 
-def cluster_pairs(track: np.ndarray, detection: np.ndarray, n_tracks: int, n_dets: int) -> PairClusters:
+def cluster_pairs(
+    track: np.ndarray, detection: np.ndarray, n_tracks: int, n_dets: int
+) -> PairClusters:
     """Split pairs (``track[k]``, ``detection[k]``) into connected components of the bipartite
     graph tracks ↔ detections."""
     if track.size == 0:
@@ -47,7 +49,9 @@ def cluster_pairs(track: np.ndarray, detection: np.ndarray, n_tracks: int, n_det
     return PairClusters(singles, groups)
 
 
-def _component_labels(track: np.ndarray, detection: np.ndarray, n_tracks: int, n_dets: int) -> np.ndarray:
+def _component_labels(
+    track: np.ndarray, detection: np.ndarray, n_tracks: int, n_dets: int
+) -> np.ndarray:
     """Connected-component label of each pair, by min-label propagation.
 
     Each track starts with its own index as label; detections take the least label of their

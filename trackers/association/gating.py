@@ -19,7 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
-__all__ = ["GatedPairs", "max_eigenvalue_2x2", "gate", "inverse_2x2", "log_gaussian_2d"]
+__all__ = ["GatedPairs", "gate", "inverse_2x2", "log_gaussian_2d", "max_eigenvalue_2x2"]
 
 _LOG_2PI = float(np.log(2.0 * np.pi))
 

@@ -68,5 +68,23 @@ def test_gate_uses_each_detection_covariance():
 
 
 def test_gate_empty_inputs():
-    assert gate(np.zeros((0, 2)), np.zeros((0, 2, 2)), np.ones((3, 2)), np.tile(np.eye(2), (3, 1, 1)), 9.0).size == 0
-    assert gate(np.ones((3, 2)), np.tile(np.eye(2), (3, 1, 1)), np.zeros((0, 2)), np.zeros((0, 2, 2)), 9.0).size == 0
+    assert (
+        gate(
+            np.zeros((0, 2)),
+            np.zeros((0, 2, 2)),
+            np.ones((3, 2)),
+            np.tile(np.eye(2), (3, 1, 1)),
+            9.0,
+        ).size
+        == 0
+    )
+    assert (
+        gate(
+            np.ones((3, 2)),
+            np.tile(np.eye(2), (3, 1, 1)),
+            np.zeros((0, 2)),
+            np.zeros((0, 2, 2)),
+            9.0,
+        ).size
+        == 0
+    )

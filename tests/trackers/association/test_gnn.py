@@ -42,7 +42,9 @@ def test_gnn_prefers_the_global_optimum_to_greedy():
 
 
 def test_gnn_leaves_pairs_with_no_gain_unassigned():
-    assert gnn_assign(np.array([0, 1]), np.array([0, 1]), np.array([-1.0, 2.0]), 2, 2).tolist() == [1]
+    assert gnn_assign(np.array([0, 1]), np.array([0, 1]), np.array([-1.0, 2.0]), 2, 2).tolist() == [
+        1
+    ]
 
 
 @pytest.mark.parametrize("seed", range(20))
