@@ -37,7 +37,7 @@ from clients.scenarios.multitarget import (
 )
 from trackers.config import TrackerConfig
 from trackers.evaluation.continuity import ContinuityCounter
-from trackers.evaluation.crb import cv_matrices, pcrb_linear
+from trackers.evaluation.crb import cv_position_bound
 from trackers.evaluation.gospa import gospa
 from trackers.pipeline import TrackingPipeline
 from trackers.types import Scan
@@ -243,14 +243,7 @@ def bench_crb(runs: int, n_scans: int) -> None:
                 sq_err[k] += float(np.sum((np.asarray(t.position) - sim.truth_states[0, :2]) ** 2))
                 counts[k] += 1
     rmse = np.sqrt(sq_err / np.maximum(counts, 1))
-    F, Q = cv_matrices(dt, q)
-    H = np.array([[1.0, 0, 0, 0], [0, 1.0, 0, 0]])
-    R = sigma**2 * np.eye(2)
-    P0 = np.diag(
-        [sigma**2, sigma**2, v_std**2, v_std**2]
-    )  # the posterior after the first detection
-    bounds = pcrb_linear(F, Q, H, R, np.linalg.inv(P0), n_scans - 1)
-    crb = np.concatenate([[math.sqrt(2) * sigma], np.sqrt(bounds[:, 0, 0] + bounds[:, 1, 1])])
+    crb = cv_position_bound(dt, q, sigma, v_std, n_scans)
     ratio = rmse / crb
     for k in (0, 1, 2, 5, 10, 20, n_scans - 1):
         if k < n_scans:

@@ -7,7 +7,7 @@ import numpy as np
 
 from clients.scenarios.multitarget import ScenarioConfig, SensorSpec, simulate
 from trackers.config import TrackerConfig
-from trackers.evaluation.crb import cv_matrices, pcrb_linear
+from trackers.evaluation.crb import cv_position_bound
 from trackers.pipeline import TrackingPipeline
 
 Q, SIGMA, V_STD, DT = 0.05, 5.0, 10.0, 1.0
@@ -38,11 +38,7 @@ def test_position_rmse_is_within_ten_percent_of_the_pcrb():
             (track,) = pipeline.process(sim.to_scan()).tracks
             sq[k] += np.sum((np.asarray(track.position) - sim.truth_states[0, :2]) ** 2)
     rmse = np.sqrt(sq / runs)
-    F, Qm = cv_matrices(DT, Q)
-    H = np.eye(2, 4)
-    P0 = np.diag([SIGMA**2, SIGMA**2, V_STD**2, V_STD**2])
-    J = pcrb_linear(F, Qm, H, SIGMA**2 * np.eye(2), np.linalg.inv(P0), scans - 1)
-    crb = np.concatenate([[math.sqrt(2) * SIGMA], np.sqrt(J[:, 0, 0] + J[:, 1, 1])])
+    crb = cv_position_bound(DT, Q, SIGMA, V_STD, scans)
     pooled = math.sqrt(np.mean(rmse[10:] ** 2) / np.mean(crb[10:] ** 2))
     # Monte Carlo spread of the pooled ratio is about 1/sqrt(2 · 120 · 20) ≈ 1.4 %.
     assert 0.95 < pooled <= 1.10

@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["POSITION_H", "cv_matrices", "pcrb_linear"]
+__all__ = ["POSITION_H", "cv_matrices", "cv_position_bound", "pcrb_linear"]
 
 POSITION_H = np.array([[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0]])
 """Position measurement matrix for the state ``[x, y, vx, vy]``."""
@@ -95,3 +95,26 @@ def cv_matrices(dt: float, q: float) -> tuple[np.ndarray, np.ndarray]:
     Q[0, 2] = Q[2, 0] = Q[1, 3] = Q[3, 1] = q * T**2 / 2.0
     Q[2, 2] = Q[3, 3] = q * T
     return F, Q
+
+
+def cv_position_bound(
+    dt: float, q: float, sigma: float, velocity_std: float, n_scans: int
+) -> np.ndarray:
+    """Root position bound ``sqrt(P_k[x,x] + P_k[y,y])`` at scans ``0 .. n_scans − 1`` for a
+    nearly-constant-velocity target seen every ``dt`` with Pd = 1 and noise ``σ² I``.
+
+    Scan 0 is the first detection: the information after it is that of the prior
+    ``J_0 = diag(σ², σ², σ_v², σ_v²)⁻¹`` (position from the detection, velocity from a
+    zero-mean prior of spread ``σ_v``), so the bound there is ``√2 σ``; later scans follow
+    :func:`pcrb_linear`.
+    """
+    if n_scans < 1:
+        raise ValueError("n_scans must be >= 1")
+    F, Q = cv_matrices(dt, q)
+    P0 = np.diag([sigma**2, sigma**2, velocity_std**2, velocity_std**2])
+    out = np.empty(n_scans)
+    out[0] = np.sqrt(P0[0, 0] + P0[1, 1])
+    if n_scans > 1:
+        J = pcrb_linear(F, Q, POSITION_H, sigma**2 * np.eye(2), np.linalg.inv(P0), n_scans - 1)
+        out[1:] = np.sqrt(J[:, 0, 0] + J[:, 1, 1])
+    return out

@@ -87,3 +87,13 @@ def test_invalid_inputs() -> None:
         pcrb_linear(F, Q, POSITION_H, np.eye(2), np.eye(4), -1)
     with pytest.raises(ValueError):
         cv_matrices(-1.0, 0.1)
+
+
+def test_cv_position_bound_starts_at_the_detection_and_settles():
+    from trackers.evaluation.crb import cv_position_bound
+
+    b = cv_position_bound(dt=1.0, q=0.05, sigma=5.0, velocity_std=10.0, n_scans=80)
+    assert b[0] == pytest.approx(np.sqrt(2) * 5.0)
+    assert np.all(np.diff(b[1:]) <= 1e-12)  # the bound only tightens after the first update
+    assert b[-1] == pytest.approx(b[-2], rel=1e-6)  # steady state
+    assert b[-1] < 5.0  # filtering beats a single detection's √2 σ
