@@ -20,10 +20,9 @@ import math
 import queue
 import sys
 import time
-import urllib.error
 import urllib.parse
 import urllib.request
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from typing import Any, TextIO
 
 import orjson
@@ -66,6 +65,22 @@ def _filter(report: dict[str, Any], kinds: set[str] | None) -> dict[str, Any]:
     return {**report, "tracks": [t for t in report.get("tracks", []) if t["kind"] in kinds]}
 
 
+def _poll(
+    fetch: Callable[[], Iterable[dict[str, Any]]], *, follow: bool, interval: float
+) -> Iterator[dict[str, Any]]:
+    """The reports of one ``fetch()``; while following, those with a new ``seq`` of a
+    ``fetch()`` every ``interval`` s."""
+    last_seq: int | None = None
+    while True:
+        for report in fetch():
+            if not follow or report.get("seq") != last_seq:
+                last_seq = report.get("seq")
+                yield report
+        if not follow:
+            return
+        time.sleep(interval)
+
+
 def rest_reports(
     url: str,
     *,
@@ -80,17 +95,13 @@ def rest_reports(
     if kind:
         params["kind"] = kind
     full = url.rstrip("/") + "/api/v1/tracks?" + urllib.parse.urlencode(params)
-    last_seq: int | None = None
-    while True:
+
+    def fetch() -> Iterator[dict[str, Any]]:
         with urllib.request.urlopen(full, timeout=timeout) as resp:
             report = orjson.loads(resp.read())
-        if not follow:
-            yield report
-            return
-        if report.get("seq") != last_seq:
-            last_seq = report.get("seq")
-            yield report
-        time.sleep(interval)
+        yield report
+
+    return _poll(fetch, follow=follow, interval=interval)
 
 
 def zenoh_reports(
@@ -111,22 +122,19 @@ def zenoh_reports(
         selector = f"{prefix}/state/tracks"
         params = [f"status={status}"] + ([f"kind={kind}"] if kind else [])
         selector += "?" + ";".join(params)
-        last_seq: int | None = None
-        while True:
+
+        def fetch() -> Iterator[dict[str, Any]]:
             got = False
             for reply in session.get(selector, timeout=timeout):
                 if reply.ok is None:
                     continue
                 got = True
-                report = orjson.loads(reply.ok.payload.to_bytes())
-                if not follow or report.get("seq") != last_seq:
-                    last_seq = report.get("seq")
-                    yield report
+                yield orjson.loads(reply.ok.payload.to_bytes())
             if not got and not follow:
                 raise TimeoutError(f"no answer from {prefix}/state/tracks in {timeout} s")
-            if not follow:
-                return
-            time.sleep(interval)
+
+        yield from _poll(fetch, follow=follow, interval=interval)
+        return
     inbox: queue.Queue[bytes] = queue.Queue(maxsize=1000)
 
     def on_sample(sample: zenoh.Sample) -> None:
@@ -197,51 +205,32 @@ def _print_reports(
 def main(argv: Sequence[str] | None = None, out: TextIO | None = None) -> int:
     args = build_parser().parse_args(argv)
     out = out or sys.stdout
-    run: Callable[[], int]
+    options: dict[str, Any] = {
+        "status": args.status,
+        "kind": args.kind,
+        "follow": args.follow,
+        "interval": args.interval,
+        "timeout": args.timeout,
+    }
+    session: zenoh.Session | None = None
     if args.zenoh:
         try:
             session = open_session(args.mode, [args.zenoh])
         except zenoh.ZError as exc:
             print(f"tracker-follow: cannot open a Zenoh session: {exc}", file=sys.stderr)
             return 1
-
-        def run() -> int:
-            try:
-                reports = zenoh_reports(
-                    session,
-                    args.prefix,
-                    query=args.query,
-                    status=args.status,
-                    kind=args.kind,
-                    follow=args.follow,
-                    interval=args.interval,
-                    timeout=args.timeout,
-                )
-                return _print_reports(reports, args.json, args.count, out)
-            finally:
-                session.close()
+        reports = zenoh_reports(session, args.prefix, query=args.query, **options)
     else:
-        url = args.rest or "http://127.0.0.1:8000"
-
-        def run() -> int:
-            reports = rest_reports(
-                url,
-                status=args.status,
-                kind=args.kind,
-                follow=args.follow,
-                interval=args.interval,
-                timeout=args.timeout,
-            )
-            return _print_reports(reports, args.json, args.count, out)
-
+        reports = rest_reports(args.rest or "http://127.0.0.1:8000", **options)
     try:
-        run()
+        try:
+            _print_reports(reports, args.json, args.count, out)
+        finally:
+            if session is not None:
+                session.close()
     except KeyboardInterrupt:
         return 130
-    except TimeoutError as exc:
-        print(f"tracker-follow: {exc}", file=sys.stderr)
-        return 1
-    except (urllib.error.URLError, OSError) as exc:
+    except OSError as exc:  # TimeoutError, urllib.error.URLError, ...
         print(f"tracker-follow: {exc}", file=sys.stderr)
         return 1
     return 0

@@ -23,8 +23,9 @@ import sys
 import threading
 import time
 from collections.abc import Callable, Iterable, Iterator, Sequence
+from dataclasses import replace
 from pathlib import Path
-from typing import IO, Any
+from typing import IO, Any, TypeVar
 
 import orjson
 import zenoh
@@ -46,54 +47,49 @@ from clients.zenoh_session import (
 __all__ = [
     "UnansweredError",
     "add_flow_arguments",
+    "add_pacing_arguments",
     "build_parser",
+    "check_pacing",
     "main",
     "pace",
+    "paced",
     "publish_batches",
+    "run_publisher",
     "scenario_config",
 ]
+
+T = TypeVar("T")
+
+
+_SCENARIOS: dict[str, Callable[..., ScenarioConfig]] = {
+    "scale": scale_scenario,
+    "crossing": crossing_scenario,
+}
 
 
 def scenario_config(args: argparse.Namespace) -> ScenarioConfig:
     """The scenario the flags describe."""
-    if args.scenario == "scale":
-        kwargs: dict[str, Any] = {"seed": args.seed}
-        if args.targets is not None:
-            kwargs["n_targets"] = args.targets
-        if args.clutter is not None:
-            kwargs["clutter_mean"] = args.clutter
-        if args.scans is not None:
-            kwargs["n_scans"] = args.scans
-        return scale_scenario(**kwargs)
-    if args.scenario == "crossing":
-        kwargs = {"seed": args.seed}
-        if args.targets is not None:
-            kwargs["n_targets"] = args.targets
-        if args.clutter is not None:
-            kwargs["clutter_mean"] = args.clutter
-        if args.scans is not None:
-            kwargs["n_scans"] = args.scans
-        return crossing_scenario(**kwargs)
-    config = reference_scenario(args.seed)
     changes: dict[str, Any] = {}
     if args.targets is not None:
         changes["n_targets"] = args.targets
     if args.scans is not None:
         changes["n_scans"] = args.scans
-    if changes:
-        from dataclasses import replace
-
-        config = replace(config, **changes)
-    return config
+    make = _SCENARIOS.get(args.scenario)
+    if make is None:  # reference: --clutter does not apply
+        config = reference_scenario(args.seed)
+        return replace(config, **changes) if changes else config
+    if args.clutter is not None:
+        changes["clutter_mean"] = args.clutter
+    return make(seed=args.seed, **changes)
 
 
 def pace(
-    items: Iterable[tuple[float, Any]],
+    items: Iterable[tuple[float, T]],
     *,
     realtime: bool,
     speed: float = 1.0,
     stop: threading.Event | None = None,
-) -> Iterable[Any]:
+) -> Iterable[T]:
     """Yield each ``(time, item)``'s item; in real time, not before ``(time - first) / speed``
     seconds of wall time have passed since the first."""
     start_wall: float | None = None
@@ -178,9 +174,108 @@ def add_flow_arguments(parser: argparse.ArgumentParser) -> None:
     )
 
 
+def add_pacing_arguments(parser: argparse.ArgumentParser) -> None:
+    """``--rate``, ``--speed`` and ``--time-offset`` (see :func:`paced`)."""
+    parser.add_argument(
+        "--rate",
+        choices=("realtime", "max"),
+        default="realtime",
+        help="realtime: batch times pace the puts; max: as fast as the service takes them",
+    )
+    parser.add_argument("--speed", type=float, default=1.0, help="real-time speed-up factor")
+    parser.add_argument(
+        "--time-offset", type=float, default=0.0, help="seconds added to every batch time"
+    )
+
+
+def check_pacing(prog: str, args: argparse.Namespace) -> bool:
+    """False, after saying why on stderr, when the pacing flags cannot be used."""
+    if args.speed <= 0:
+        print(f"{prog}: --speed must be > 0", file=sys.stderr)
+        return False
+    return True
+
+
+def paced(args: argparse.Namespace, items: Iterable[tuple[float, T]]) -> Iterable[T]:
+    """:func:`pace` as the flags of :func:`add_pacing_arguments` ask."""
+    return pace(items, realtime=args.rate == "realtime", speed=args.speed)
+
+
+def run_publisher(
+    prog: str,
+    args: argparse.Namespace,
+    items: Iterable[tuple[str, bytes]],
+    headline: Callable[[int, float], str],
+    *,
+    record: Path | None = None,
+) -> int:
+    """Open a session from the flags, :func:`publish_batches` ``items`` (already paced) and
+    print a summary, ``headline(published, elapsed)`` followed by the answer counts. Errors
+    are printed as ``{prog}: ...``; returns the exit code. ``record`` also gets every
+    payload sent, one per line."""
+    try:
+        session = session_from_args(args)
+    except zenoh.ZError as exc:
+        print(f"{prog}: cannot open a Zenoh session: {exc}", file=sys.stderr)
+        return 1
+    out: IO[bytes] | None = None
+    counter: ReportCounter | None = None
+    publisher = BatchPublisher(session, args.prefix, wait_matching=args.wait_matching)
+    realtime = args.rate == "realtime"
+
+    def sent(sensor: str, payload: bytes) -> None:
+        if out is not None:
+            out.write(payload + b"\n")
+        if not args.quiet and realtime:
+            print(f"{sensor}: {len(payload)} bytes", flush=True)
+
+    try:
+        counter = ReportCounter(session, args.prefix, publisher.sensors, print_error)
+        if record is not None:
+            out = record.open("wb")
+        t0 = time.monotonic()
+        publish_batches(
+            publisher,
+            counter,
+            items,
+            max_in_flight=args.max_in_flight,
+            answer_timeout=args.answer_timeout,
+            on_sent=sent,
+        )
+        elapsed = time.monotonic() - t0
+        print(
+            f"{headline(publisher.published, elapsed)}; "
+            f"{counter.answered} answered, {counter.errors} error reports",
+            flush=True,
+        )
+        return 0
+    except LookupError as exc:
+        print(
+            f"{prog}: no subscriber on {publisher.key(str(exc.args[0]))} after "
+            f"{args.wait_matching} s: is the service running?",
+            file=sys.stderr,
+        )
+        return 1
+    except UnansweredError as exc:
+        print(f"{prog}: the service did not answer: {exc}", file=sys.stderr)
+        return 1
+    except KeyboardInterrupt:
+        return 130
+    finally:
+        if out is not None:
+            out.close()
+        publisher.close()
+        if counter is not None:
+            counter.close()
+        session.close()
+
+
+PROG = "tracker-publish"
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
-        prog="tracker-publish",
+        prog=PROG,
         description="Simulate a scenario and publish its detection batches over Zenoh.",
     )
     parser.add_argument(
@@ -193,16 +288,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--scans", type=int, help="number of scans per sensor")
     parser.add_argument("--targets", type=int, help="number of targets")
     parser.add_argument("--clutter", type=float, help="mean false alarms per scan (scale)")
-    parser.add_argument(
-        "--rate",
-        choices=("realtime", "max"),
-        default="realtime",
-        help="realtime: batch times pace the puts; max: as fast as the service takes them",
-    )
-    parser.add_argument("--speed", type=float, default=1.0, help="real-time speed-up factor")
-    parser.add_argument(
-        "--time-offset", type=float, default=0.0, help="seconds added to every batch time"
-    )
+    add_pacing_arguments(parser)
     parser.add_argument("--record", type=Path, metavar="FILE", help="also write JSON lines")
     add_flow_arguments(parser)
     parser.add_argument("-q", "--quiet", action="store_true", help="print only the summary")
@@ -210,80 +296,30 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _headline(published: int, elapsed: float) -> str:
+    rate = published / elapsed if elapsed > 0 else float("inf")
+    return f"published {published} batches in {elapsed:.2f} s ({rate:.0f} batches/s)"
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
-    if args.speed <= 0:
-        print("tracker-publish: --speed must be > 0", file=sys.stderr)
+    if not check_pacing(PROG, args):
         return 2
     try:
         config = scenario_config(args)
     except ValueError as exc:
-        print(f"tracker-publish: {exc}", file=sys.stderr)
+        print(f"{PROG}: {exc}", file=sys.stderr)
         return 2
     scans = simulate(config)
-    try:
-        session = session_from_args(args)
-    except zenoh.ZError as exc:
-        print(f"tracker-publish: cannot open a Zenoh session: {exc}", file=sys.stderr)
-        return 1
-    record: IO[bytes] | None = None
-    counter: ReportCounter | None = None
-    publisher = BatchPublisher(session, args.prefix, wait_matching=args.wait_matching)
-    realtime = args.rate == "realtime"
 
     def items() -> Iterator[tuple[str, bytes]]:
         batches = ((s.time + args.time_offset, s) for s in scans)
-        for scan in pace(batches, realtime=realtime, speed=args.speed):
+        for scan in paced(args, batches):
             batch = scan.to_batch()
             batch["time"] = scan.time + args.time_offset
             yield scan.sensor_id, orjson.dumps(batch)
 
-    def sent(sensor: str, payload: bytes) -> None:
-        if record is not None:
-            record.write(payload + b"\n")
-        if not args.quiet and realtime:
-            print(f"{sensor}: {len(payload)} bytes", flush=True)
-
-    try:
-        counter = ReportCounter(session, args.prefix, publisher.sensors, print_error)
-        if args.record is not None:
-            record = args.record.open("wb")
-        t0 = time.monotonic()
-        publish_batches(
-            publisher,
-            counter,
-            items(),
-            max_in_flight=args.max_in_flight,
-            answer_timeout=args.answer_timeout,
-            on_sent=sent,
-        )
-        elapsed = time.monotonic() - t0
-        rate = publisher.published / elapsed if elapsed > 0 else float("inf")
-        print(
-            f"published {publisher.published} batches in {elapsed:.2f} s ({rate:.0f} batches/s); "
-            f"{counter.answered} answered, {counter.errors} error reports",
-            flush=True,
-        )
-        return 0
-    except LookupError as exc:
-        print(
-            f"tracker-publish: no subscriber on {publisher.key(str(exc.args[0]))} after "
-            f"{args.wait_matching} s: is the service running?",
-            file=sys.stderr,
-        )
-        return 1
-    except UnansweredError as exc:
-        print(f"tracker-publish: the service did not answer: {exc}", file=sys.stderr)
-        return 1
-    except KeyboardInterrupt:
-        return 130
-    finally:
-        if record is not None:
-            record.close()
-        publisher.close()
-        if counter is not None:
-            counter.close()
-        session.close()
+    return run_publisher(PROG, args, items(), _headline, record=args.record)
 
 
 if __name__ == "__main__":

@@ -13,20 +13,19 @@ from __future__ import annotations
 import argparse
 import math
 import sys
-import time
 from collections.abc import Iterator, Sequence
 from pathlib import Path
 
 import orjson
-import zenoh
 
-from clients.publish import UnansweredError, add_flow_arguments, pace, print_error, publish_batches
-from clients.zenoh_session import (
-    BatchPublisher,
-    ReportCounter,
-    add_zenoh_arguments,
-    session_from_args,
+from clients.publish import (
+    add_flow_arguments,
+    add_pacing_arguments,
+    check_pacing,
+    paced,
+    run_publisher,
 )
+from clients.zenoh_session import add_zenoh_arguments
 
 __all__ = ["build_parser", "main", "read_batches"]
 
@@ -63,85 +62,35 @@ def read_batches(
             yield (last_time if math.isfinite(last_time) else 0.0), (sensor, line)
 
 
+PROG = "tracker-replay"
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
-        prog="tracker-replay",
+        prog=PROG,
         description="Replay a JSON-lines file of detection batches over Zenoh.",
     )
     parser.add_argument("file", type=Path, help="JSON lines, one Detection batch per line")
-    parser.add_argument(
-        "--rate",
-        choices=("realtime", "max"),
-        default="realtime",
-        help="realtime: batch times pace the puts; max: as fast as the service takes them",
-    )
-    parser.add_argument("--speed", type=float, default=1.0, help="real-time speed-up factor")
-    parser.add_argument(
-        "--time-offset", type=float, default=0.0, help="seconds added to every batch time"
-    )
+    add_pacing_arguments(parser)
     add_flow_arguments(parser)
     parser.add_argument("-q", "--quiet", action="store_true", help="print only the summary")
     add_zenoh_arguments(parser)
     return parser
 
 
+def _headline(published: int, elapsed: float) -> str:
+    return f"replayed {published} batches in {elapsed:.2f} s"
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
-    if args.speed <= 0:
-        print("tracker-replay: --speed must be > 0", file=sys.stderr)
+    if not check_pacing(PROG, args):
         return 2
     if not args.file.is_file():
-        print(f"tracker-replay: {args.file}: no such file", file=sys.stderr)
+        print(f"{PROG}: {args.file}: no such file", file=sys.stderr)
         return 2
-    try:
-        session = session_from_args(args)
-    except zenoh.ZError as exc:
-        print(f"tracker-replay: cannot open a Zenoh session: {exc}", file=sys.stderr)
-        return 1
-    publisher = BatchPublisher(session, args.prefix, wait_matching=args.wait_matching)
-    counter: ReportCounter | None = None
-    realtime = args.rate == "realtime"
-
-    def sent(sensor: str, payload: bytes) -> None:
-        if not args.quiet and realtime:
-            print(f"{sensor}: {len(payload)} bytes", flush=True)
-
-    try:
-        counter = ReportCounter(session, args.prefix, publisher.sensors, print_error)
-        t0 = time.monotonic()
-        items = read_batches(args.file, args.time_offset)
-        publish_batches(
-            publisher,
-            counter,
-            pace(items, realtime=realtime, speed=args.speed),
-            max_in_flight=args.max_in_flight,
-            answer_timeout=args.answer_timeout,
-            on_sent=sent,
-        )
-        elapsed = time.monotonic() - t0
-        print(
-            f"replayed {publisher.published} batches in {elapsed:.2f} s; "
-            f"{counter.answered} answered, {counter.errors} error reports",
-            flush=True,
-        )
-        return 0
-    except LookupError as exc:
-        print(
-            f"tracker-replay: no subscriber on {publisher.key(str(exc.args[0]))} after "
-            f"{args.wait_matching} s: is the service running?",
-            file=sys.stderr,
-        )
-        return 1
-    except UnansweredError as exc:
-        print(f"tracker-replay: the service did not answer: {exc}", file=sys.stderr)
-        return 1
-    except KeyboardInterrupt:
-        return 130
-    finally:
-        publisher.close()
-        if counter is not None:
-            counter.close()
-        session.close()
+    items = paced(args, read_batches(args.file, args.time_offset))
+    return run_publisher(PROG, args, items, _headline)
 
 
 if __name__ == "__main__":

@@ -204,6 +204,20 @@ class SettingsLoadError(Exception):
     """A setting could not be used; the message says which and why."""
 
 
+def _default_text(name: str, field: FieldInfo) -> str | None:
+    """A setting's default as its flag would take it; None when there is none to show."""
+    if name == "instance_id":
+        return "random"  # a new one from its factory on every start
+    if name == "api_token":
+        return None
+    default = field.get_default(call_default_factory=True)
+    if default is None:
+        return None
+    if isinstance(default, list):  # endpoint lists, as split_endpoints reads them
+        return ",".join(default) or "none"
+    return str(default)
+
+
 def build_parser(prog: str = "tracker-service") -> argparse.ArgumentParser:
     """One flag per setting (``--zenoh-mode`` for ``zenoh_mode``); unset flags do not override."""
     parser = argparse.ArgumentParser(
@@ -218,10 +232,8 @@ def build_parser(prog: str = "tracker-service") -> argparse.ArgumentParser:
     for name, field in Settings.model_fields.items():
         flag = "--" + name.replace("_", "-")
         help_text = field.description or ""
-        default = field.get_default(call_default_factory=False)
-        if name == "instance_id":
-            help_text += " (default: random)"
-        elif default is not None and not callable(default) and name != "api_token":
+        default = _default_text(name, field)
+        if default is not None:
             help_text += f" (default: {default})"
         if field.annotation is bool:
             parser.add_argument(flag, action=argparse.BooleanOptionalAction, help=help_text)

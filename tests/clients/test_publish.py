@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 import time
 from pathlib import Path
 
@@ -138,3 +139,19 @@ def test_publish_gives_up_when_the_service_stops_answering(
         session.close()
     assert code == 1
     assert "did not answer: 3 of 3 batches unanswered" in capsys.readouterr().err
+
+
+def test_publish_summary_is_what_the_load_benchmark_parses(
+    service: RunningService, capsys: pytest.CaptureFixture[str]
+) -> None:
+    code = publish.main(["--rate", "max", "--scans", "3", "-e", service.endpoint, "-q"])
+    assert code == 0
+    out = capsys.readouterr().out
+    m = re.search(r"published (\d+) batches in ([\d.]+) s", out)  # benchmarks/service_load.py
+    assert m is not None and m.group(1) == "3"
+    assert re.search(r"\(\d+ batches/s\); 3 answered, 0 error reports\n$", out), out
+
+
+def test_publish_bad_speed(capsys: pytest.CaptureFixture[str]) -> None:
+    assert publish.main(["--speed", "0"]) == 2
+    assert capsys.readouterr().err == "tracker-publish: --speed must be > 0\n"

@@ -11,7 +11,7 @@ import pytest
 
 from clients import replay
 from clients.scenarios.multitarget import reference_scenario, simulate
-from tests.conftest import RunningService
+from tests.conftest import RunningService, free_port
 from tests.service.helpers import wait_until
 
 pytestmark = pytest.mark.timeout(120)
@@ -78,3 +78,22 @@ def test_replay_skips_unroutable_lines_and_reports_bad_batches(
 
 def test_replay_missing_file(tmp_path: Path) -> None:
     assert replay.main([str(tmp_path / "nope.jsonl")]) == 2
+
+
+def test_replay_bad_speed(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    path = _record(tmp_path / "rec.jsonl")
+    assert replay.main([str(path), "--speed", "-1"]) == 2
+    assert capsys.readouterr().err == "tracker-replay: --speed must be > 0\n"
+
+
+def test_replay_without_service_fails_clearly(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    path = _record(tmp_path / "rec.jsonl")
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    code = replay.main([str(path), "-e", endpoint, "--wait-matching", "0.3", "-q"])
+    assert code == 1
+    assert capsys.readouterr().err == (
+        "tracker-replay: no subscriber on tracking/detections/radar-1 after 0.3 s: "
+        "is the service running?\n"
+    )

@@ -99,6 +99,17 @@ def test_bad_settings_file(tmp_path: Path) -> None:
         load_settings(["--settings-file", str(path)])
 
 
+def test_help_shows_the_real_defaults(capsys: pytest.CaptureFixture[str]) -> None:
+    with pytest.raises(SystemExit) as exc:
+        main(["--help"])
+    assert exc.value.code == 0
+    text = " ".join(capsys.readouterr().out.split())  # argparse wraps lines anywhere
+    assert "PydanticUndefined" not in text
+    assert "to listen on ('none' for none) (default: tcp/127.0.0.1:7447)" in text
+    assert "endpoints to connect to (default: none)" in text
+    assert "(default: random)" in text and "(default: 8000)" in text
+
+
 def test_main_exits_2_on_bad_settings(capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["--http-port", "http"]) == 2
     err = capsys.readouterr().err
