@@ -288,11 +288,14 @@ def test_demo_shows_tracks_at_once(processes: list[ServiceProcess]) -> None:
     assert re.search(r"demo: seq \d+ t=[\d.]+ s: \d+ confirmed tracks: T\d+ \(", err), err
 
 
-@pytest.mark.slow
 def test_rest_latency_under_max_rate_publishing(processes: list[ServiceProcess]) -> None:
-    """GET /api/v1/tracks p99 < 20 ms while the engine processes ~200 batches/s; the service,
-    the publisher and this client are three processes."""
+    """The issue's service targets, as a regression guard (``benchmarks.service_load`` prints
+    the figures): batches of ~55 detections published over Zenoh by another process as fast as
+    the service takes them (reliable, blocking) are all processed, at ≥ 200 batches/s, while
+    ``GET /api/v1/tracks`` answers with p99 < 20 ms. Service, publisher and this client are
+    three processes on the machine's cores."""
     svc = _start(processes, "--api-token", "x", "--log-level", "warning")
+    scans = 2500
     pub = subprocess.Popen(
         [
             sys.executable,
@@ -301,7 +304,7 @@ def test_rest_latency_under_max_rate_publishing(processes: list[ServiceProcess])
             "--rate",
             "max",
             "--scans",
-            "3000",
+            str(scans),
             "-e",
             svc.endpoint,
             "-q",
@@ -314,20 +317,31 @@ def test_rest_latency_under_max_rate_publishing(processes: list[ServiceProcess])
             wait_until(lambda: http.get("/api/v1/stats").json()["seq"] > 50, timeout=20)
             s0 = http.get("/api/v1/stats").json()
             latencies = []
-            t_end = time.monotonic() + 5.0
+            t_end = time.monotonic() + 4.0
             while time.monotonic() < t_end:
                 t0 = time.perf_counter()
                 assert http.get("/api/v1/tracks").status_code == 200
                 latencies.append(time.perf_counter() - t0)
                 time.sleep(0.002)
             s1 = http.get("/api/v1/stats").json()
+            assert pub.wait(60) == 0
+            wait_until(
+                lambda: http.get("/api/v1/stats").json()["batches_processed"] >= scans,
+                timeout=20,
+                what="every published batch processed",
+            )
+            final = http.get("/api/v1/stats").json()
         rate = (s1["batches_processed"] - s0["batches_processed"]) / (
             s1["uptime_s"] - s0["uptime_s"]
         )
         p50, p99 = np.percentile(latencies, [50, 99]) * 1000
         print(f"\np50 {p50:.2f} ms, p99 {p99:.2f} ms, {rate:.0f} batches/s")
-        assert rate > 150
+        assert final["batches_received"] == scans
+        assert final["batches_processed"] == scans
+        assert final["batches_rejected"] == 0 and final["batches_dropped"] == 0
+        assert rate >= 200
         assert p99 < 20.0
     finally:
-        pub.kill()
+        if pub.poll() is None:
+            pub.kill()
         pub.wait(5)
