@@ -113,6 +113,25 @@ def run_phase(
     )
 
 
+def ingest_cost(repeats: int = 2000) -> tuple[float, int]:
+    """Median milliseconds to decode, validate and convert one reference batch (JSON bytes to
+    tracker arrays), as the engine does for each batch; and the batch's detection count."""
+    import orjson
+
+    from clients.scenarios.multitarget import reference_scenario, simulate
+    from service.convert import batch_to_scan
+    from service.schemas import decode_batch
+
+    scan = simulate(reference_scenario(0))[50]
+    payload = orjson.dumps(scan.to_batch())
+    times = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        batch_to_scan(decode_batch(payload), 5.0)
+        times.append(time.perf_counter() - t0)
+    return 1e3 * float(np.median(times[repeats // 10 :])), len(scan.z)
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(
         prog="python -m benchmarks.service_load",
@@ -170,6 +189,11 @@ def main(argv: list[str] | None = None) -> int:
         except subprocess.TimeoutExpired:
             service.kill()
 
+    decode_ms, n_det = ingest_cost()
+    print(
+        f"== ingest: decode, validate and convert a {n_det}-detection batch: "
+        f"median {decode_ms:.3f} ms (in the engine's worker, before the tracker)"
+    )
     print("== the service under load: ~55-detection batches over Zenoh from another process,")
     print("   GET /api/v1/tracks ~100/s from a third; service, publisher and reader share 2 cores")
     print(
