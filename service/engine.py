@@ -19,6 +19,7 @@ from __future__ import annotations
 import contextlib
 import heapq
 import itertools
+import json
 import logging
 import math
 import os
@@ -280,6 +281,7 @@ class Engine:
         self._heap: list[tuple[float, int, _Item, DetectionBatchIn]] = []
         self._heap_counter = itertools.count()
         self._newest_time = -math.inf
+        self._last_wall = time.monotonic()  # wall time of the last processed batch
         self._thread: threading.Thread | None = None
         self._stopping = threading.Event()
         self._stop_deadline = math.inf
@@ -474,24 +476,12 @@ class Engine:
     def _run(self) -> None:
         q = self._queue
         while True:
-            timeout = self._next_wall_release()
-            if self._stopping.is_set():
-                timeout = 0.05 if timeout is None else min(timeout, 0.05)
             try:
-                item = q.get(timeout=timeout) if timeout is None or timeout > 0 else q.get_nowait()
-            except queue.Empty:
-                item = None
-            if isinstance(item, _Stop):
-                break
-            self._apply_pending()
-            if item is not None:
-                if self._stopping.is_set() and time.monotonic() > self._stop_deadline:
-                    self._drop(item, "the service is stopping")
-                else:
-                    self._safe_handle(item)
-            self._release_due(time.monotonic())
-            if self._stopping.is_set() and item is None and q.empty():
-                break
+                if not self._run_once(q):
+                    break
+            except Exception:  # a bug outside any one batch: the worker must not die of it
+                log.exception("tracker worker: unexpected error; going on")
+                time.sleep(0.05)
         self._apply_pending()
         while self._heap:  # flush what the reorder window held, in time order
             _, _, held, batch = heapq.heappop(self._heap)
@@ -504,6 +494,32 @@ class Engine:
             if isinstance(rest, _Item):
                 self._drop(rest, "the service is stopping")
         self._flush_drop_log()
+
+    def _run_once(self, q: queue.Queue[_Item | _Stop]) -> bool:
+        """Take at most one batch, then release what the reorder window lets go; ``False``
+        when the worker should stop."""
+        timeout = self._next_wall_release()
+        if self._stopping.is_set():
+            timeout = 0.05 if timeout is None else min(timeout, 0.05)
+        try:
+            item = q.get(timeout=timeout) if timeout is None or timeout > 0 else q.get_nowait()
+        except queue.Empty:
+            item = None
+        if isinstance(item, _Stop):
+            return False
+        try:
+            self._apply_pending()
+            if item is not None:
+                if self._stopping.is_set() and time.monotonic() > self._stop_deadline:
+                    self._drop(item, "the service is stopping")
+                else:
+                    self._safe_handle(item)
+            self._release_due(time.monotonic())
+        except Exception as exc:
+            if item is not None and not item.future.done():  # refused, never lost
+                self._reject(item, "internal_error", f"{type(exc).__name__}: {exc}", None)
+            raise
+        return not (self._stopping.is_set() and item is None and q.empty())
 
     def _safe_handle(self, item: _Item) -> None:
         try:
@@ -541,6 +557,21 @@ class Engine:
         self.stats.detections_in(len(batch.detections))
         window = self._applied_ingest.reorder_window
         last = self._pipeline.last_time
+        if last is not None:
+            # Batch time may run ahead of the last processed time by the wall time since then
+            # plus max_time_jump; further ahead, it would put every later batch out of sequence.
+            jump = self._applied_ingest.max_time_jump
+            waited = time.monotonic() - self._last_wall
+            if batch.time - last > jump + waited:
+                self._reject(
+                    item,
+                    "time_jump",
+                    f"time {batch.time} is {batch.time - last:.6g} s after the last processed "
+                    f"time {last}: more than ingest.max_time_jump = {jump} s plus the "
+                    f"{waited:.3g} s of wall time since",
+                    batch,
+                )
+                return
         if window > 0 and (last is None or batch.time >= last):
             self._newest_time = max(self._newest_time, batch.time)
             heapq.heappush(self._heap, (batch.time, next(self._heap_counter), item, batch))
@@ -589,6 +620,7 @@ class Engine:
             self._reject(item, "internal_error", f"{type(exc).__name__}: {exc}", batch)
             return
         self._seq += 1
+        self._last_wall = time.monotonic()
         seq = self._seq
         confirmed = [track_to_dict(t) for t in result.confirmed()]
         report = report_dict(seq, result, ms, confirmed)
@@ -684,7 +716,10 @@ def _peek(payload: bytes) -> tuple[str | None, float | None]:
     try:
         obj = orjson.loads(payload)
     except (orjson.JSONDecodeError, TypeError):
-        return None, None
+        try:  # the standard parser reads the NaN and Infinity that orjson refuses
+            obj = json.loads(payload)
+        except (ValueError, TypeError, RecursionError):
+            return None, None
     if not isinstance(obj, dict):
         return None, None
     sensor = obj.get("sensor_id")

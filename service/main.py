@@ -137,6 +137,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     ingest_defaults = IngestConfig(
         max_detections_per_batch=settings.max_detections_per_batch,
         reorder_window=settings.reorder_window,
+        max_time_jump=settings.max_time_jump,
     )
     loaded = None
     if settings.config_file is not None:
@@ -215,6 +216,21 @@ def _configure_logging(level: str) -> None:
     )
 
 
+class _Server(uvicorn.Server):
+    """Uvicorn that starts stopping the runtime as soon as it is asked to exit, so requests
+    waiting on the engine (a REST batch held by the reorder window) get their answers while
+    uvicorn drains its connections, instead of being cancelled."""
+
+    def __init__(self, config: uvicorn.Config, runtime: ServiceRuntime) -> None:
+        super().__init__(config)
+        self._runtime = runtime
+
+    def handle_exit(self, sig: int, frame: Any) -> None:
+        if not self.should_exit:
+            threading.Thread(target=self._runtime.stop, name="runtime-stop", daemon=True).start()
+        super().handle_exit(sig, frame)
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """``tracker-service``: run the service until SIGINT or SIGTERM."""
     try:
@@ -238,8 +254,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         timeout_graceful_shutdown=1,
         lifespan="on",
     )
-    server = uvicorn.Server(config)
     runtime: ServiceRuntime = app.state.runtime
+    server = _Server(config, runtime)
     try:
         runtime.start()
     except ZenohStartError as exc:

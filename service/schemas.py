@@ -47,6 +47,8 @@ __all__ = [
 ]
 
 SENSOR_ID_PATTERN = r"^[A-Za-z0-9_.\-]{1,64}$"
+#: The longest ``ingest.reorder_window`` (s): batches are held in memory that long at most.
+MAX_REORDER_WINDOW = 3600.0
 _SENSOR_ID_RE = re.compile(SENSOR_ID_PATTERN)
 
 #: The ``error`` codes of an Error report, and what each means.
@@ -56,6 +58,8 @@ ERROR_REASONS: dict[str, str] = {
     "sensor_mismatch": "the batch's sensor_id differs from the last chunk of its Zenoh key",
     "too_many_detections": "more detections than ingest.max_detections_per_batch",
     "out_of_sequence": "the batch is older than the last processed time",
+    "time_jump": "the batch's time is further ahead of the last processed time than "
+    "ingest.max_time_jump allows",
     "invalid_scan": "the tracker refused the batch's numbers",
     "overloaded": "the ingest queue stayed full: the batch was dropped, not processed",
     "internal_error": "the tracker failed on this batch; no track changed",
@@ -322,8 +326,16 @@ class IngestConfig(BaseModel):
     model_config = ConfigDict(extra="forbid", frozen=True)
 
     max_detections_per_batch: Annotated[int, Strict(), Field(ge=1)] = 10000
-    reorder_window: Annotated[Finite, Field(ge=0.0)] = Field(
+    reorder_window: Annotated[Finite, Field(ge=0.0, le=MAX_REORDER_WINDOW)] = Field(
         default=0.0, description="seconds a batch may be held back to put late ones in time order"
+    )
+    max_time_jump: Annotated[Finite, Field(gt=0.0)] = Field(
+        default=3600.0,
+        description=(
+            "seconds a batch's time may run ahead of the last processed time, beyond the wall "
+            "time that has passed since: a clock far in the future (a unit error, say) would "
+            "otherwise put every later batch out of sequence"
+        ),
     )
 
 

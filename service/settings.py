@@ -112,6 +112,12 @@ class Settings(BaseSettings):
     reorder_window: float = Field(
         default=0.0, ge=0, le=3600, description="default of the config's ingest.reorder_window, s"
     )
+    max_time_jump: float = Field(
+        default=3600.0,
+        gt=0,
+        allow_inf_nan=False,
+        description="default of the config's ingest.max_time_jump, s",
+    )
     tracks_congestion_control: Literal["block", "drop"] = Field(
         default="block", description="congestion control of the outgoing track and error reports"
     )

@@ -15,6 +15,10 @@ from typing import Any
 
 import numpy as np
 
+from service.schemas import ERROR_REASONS
+
+_REJECT_REASONS = {reason: 0 for reason in ERROR_REASONS if reason != "overloaded"}
+
 __all__ = ["WINDOW", "Stats"]
 
 #: How many of the latest batches the processing-time percentiles are over.
@@ -164,8 +168,12 @@ class Stats:
             "tracker_batches_rejected_total",
             "counter",
             "Detection batches refused with an Error report, by reason.",
-            [(f'{{reason="{_escape(r)}"}}', n) for r, n in snap["rejected_by_reason"].items()]
-            or [('{reason="none"}', 0)],
+            # every reason from the start, so that rates need no absent series; drops
+            # ("overloaded") have a counter of their own
+            [
+                (f'{{reason="{_escape(r)}"}}', n)
+                for r, n in {**_REJECT_REASONS, **snap["rejected_by_reason"]}.items()
+            ],
         )
         metric(
             "tracker_batches_dropped_total",

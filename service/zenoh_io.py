@@ -50,8 +50,13 @@ def make_config(
     return conf
 
 
+_STATUSES = ("confirmed", "tentative", "all")
+
+
 def parse_selector_filters(parameters: str) -> tuple[str, set[str] | None]:
-    """``status=all;kind=individual,extended`` (Zenoh selector parameters) -> filters."""
+    """``status=all;kind=individual,extended`` (Zenoh selector parameters) -> filters, as the
+    REST query parameters of ``GET /api/v1/tracks``. Other parameters are ignored; a
+    ``status`` other than ``confirmed``, ``tentative`` or ``all`` raises ``ValueError``."""
     status = "confirmed"
     kinds: set[str] | None = None
     for part in parameters.replace("&", ";").split(";"):
@@ -59,7 +64,9 @@ def parse_selector_filters(parameters: str) -> tuple[str, set[str] | None]:
             continue
         key, value = part.split("=", 1)
         key = key.strip()
-        if key == "status" and value in ("confirmed", "tentative", "all"):
+        if key == "status":
+            if value not in _STATUSES:
+                raise ValueError(f"status: one of {', '.join(_STATUSES)}, got {value!r}")
             status = value
         elif key == "kind" and value:
             kinds = {k for k in value.split(",") if k}
@@ -209,7 +216,11 @@ class ZenohIO:
         try:
             params = str(query.parameters)
             if params and self._filtered is not None:
-                status, kinds = parse_selector_filters(params)
+                try:
+                    status, kinds = parse_selector_filters(params)
+                except ValueError as exc:
+                    query.reply_err(str(exc).encode(), encoding=zenoh.Encoding.TEXT_PLAIN)
+                    return
                 data = dumps(self._filtered(status, kinds))
             else:
                 data = self._report_bytes()

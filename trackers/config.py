@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import asdict, dataclass, field, fields, is_dataclass
-from typing import Any, get_type_hints
+from typing import Any, get_args, get_origin, get_type_hints
 
 __all__ = [
     "GatingConfig",
@@ -205,14 +205,31 @@ def _build(cls: type, data: Any, path: str) -> Any:
         sub = f"{path}.{name}" if path else name
         if is_dataclass(hint):
             kwargs[name] = _build(hint, value, sub)  # type: ignore[arg-type]
-        elif isinstance(value, bool) or not isinstance(value, int | float | list | tuple | str):
-            raise ValueError(f"{sub}: unexpected value {value!r}")
         else:
-            kwargs[name] = tuple(value) if isinstance(value, list) else value
+            kwargs[name] = _typed(hint, value, sub)
     try:
         return cls(**kwargs)
     except TypeError as exc:  # a wrong type reached a comparison
         raise ValueError(f"{path or 'config'}: {exc}") from None
+
+
+def _typed(hint: Any, value: Any, path: str) -> Any:
+    """``value`` as the field's type: a JSON number for ``float`` (never a bool or a string),
+    a string for ``str``, a list of those for ``tuple[..., ...]``. Raises ``ValueError``."""
+    if hint is float:
+        if isinstance(value, int | float) and not isinstance(value, bool):
+            return float(value)
+        raise ValueError(f"{path}: expected a number, got {value!r}")
+    if hint is str:
+        if isinstance(value, str):
+            return value
+        raise ValueError(f"{path}: expected a string, got {value!r}")
+    if get_origin(hint) is tuple:
+        if not isinstance(value, list | tuple):
+            raise ValueError(f"{path}: expected a list, got {value!r}")
+        item = get_args(hint)[0]
+        return tuple(_typed(item, v, f"{path}[{i}]") for i, v in enumerate(value))
+    raise TypeError(f"{path}: unsupported field type {hint!r}")
 
 
 def _deep_merge(base: dict[str, Any], patch: dict[str, Any]) -> dict[str, Any]:

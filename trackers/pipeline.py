@@ -26,7 +26,21 @@ from trackers.config import TrackerConfig
 from trackers.individual import IndividualTracker
 from trackers.types import Scan, ScanRejected, StepResult, TrackSnapshot
 
-__all__ = ["PeerOutput", "PeerTracker", "ResolutionCell", "TrackingPipeline", "check_scan"]
+__all__ = [
+    "MAX_ABS_POSITION",
+    "MAX_VARIANCE",
+    "PeerOutput",
+    "PeerTracker",
+    "ResolutionCell",
+    "TrackingPipeline",
+    "check_scan",
+]
+
+#: Largest |x| or |y| a detection may have (m): far beyond any sensor of a local frame, and
+#: small enough that squared distances and covariances stay finite in double precision.
+MAX_ABS_POSITION = 1e9
+#: Largest variance a detection covariance may have (m²): a standard deviation of 10,000 km.
+MAX_VARIANCE = 1e14
 
 
 @dataclass(frozen=True)
@@ -71,8 +85,9 @@ class PeerTracker(Protocol):
 def check_scan(scan: Scan, last_time: float | None) -> None:
     """Raise :class:`ScanRejected` unless the scan's numbers are usable and in time order.
 
-    Checks: finite time not older than ``last_time``; finite positions; symmetric positive
-    definite covariances; ``pd`` in (0, 1] and ``clutter_density`` > 0 when given.
+    Checks: finite time not older than ``last_time``; finite positions with
+    ``|x|, |y| ≤ MAX_ABS_POSITION``; symmetric positive definite covariances with entries
+    ``≤ MAX_VARIANCE`` in magnitude; ``pd`` in (0, 1] and ``clutter_density`` > 0 when given.
     """
     if not math.isfinite(scan.time):
         raise ScanRejected("invalid_scan", "time: not a finite number")
@@ -85,10 +100,21 @@ def check_scan(scan: Scan, last_time: float | None) -> None:
         bad = np.flatnonzero(~np.isfinite(scan.z).all(axis=1))
         if bad.size:
             raise ScanRejected("invalid_scan", f"detections[{bad[0]}]: position not finite")
+        bad = np.flatnonzero((np.abs(scan.z) > MAX_ABS_POSITION).any(axis=1))
+        if bad.size:
+            raise ScanRejected(
+                "invalid_scan",
+                f"detections[{bad[0]}]: position beyond ±{MAX_ABS_POSITION:g} m",
+            )
         R = scan.R
         bad = np.flatnonzero(~np.isfinite(R).all(axis=(1, 2)))
         if bad.size:
             raise ScanRejected("invalid_scan", f"detections[{bad[0]}].cov: not finite")
+        bad = np.flatnonzero((np.abs(R) > MAX_VARIANCE).any(axis=(1, 2)))
+        if bad.size:
+            raise ScanRejected(
+                "invalid_scan", f"detections[{bad[0]}].cov: an entry above {MAX_VARIANCE:g} m²"
+            )
         asym = np.abs(R[:, 0, 1] - R[:, 1, 0]) > 1e-9 * (1.0 + np.abs(R[:, 0, 1]))
         det = R[:, 0, 0] * R[:, 1, 1] - R[:, 0, 1] * R[:, 1, 0]
         bad = np.flatnonzero(asym | (R[:, 0, 0] <= 0) | (det <= 0))

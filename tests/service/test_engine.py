@@ -170,6 +170,45 @@ def test_error_report_names_what_it_can(engine: Engine, sink: ListSink) -> None:
     r = engine.submit(b"\xff\xfe garbage", None, "rest")
     err = r.result(timeout=10).error
     assert err is not None and err["sensor_id"] == "unknown" and err["time"] is None
+    # NaN is no JSON, but the report still names the sensor and the time
+    nan = b'{"sensor_id": "s-9", "time": 5.0, "detections": [{"x": NaN, "y": 1.0}]}'
+    err = engine.submit(nan, None, "rest").result(timeout=10).error
+    assert err is not None
+    assert (err["sensor_id"], err["time"], err["error"]) == ("s-9", 5.0, "invalid_batch")
+    assert err["detail"] == "detections[0].x: not a finite number"
+
+
+def test_a_time_far_ahead_is_refused_and_blocks_nothing(
+    engine: Engine, sink: ListSink, scans: list[Any]
+) -> None:
+    """A clock gone wrong (nanoseconds for seconds) would put every later batch out of
+    sequence; it is refused, and the right times go on."""
+    _run(engine, [_payload(s) for s in scans[:3]])
+    before = engine.latest_report_bytes()
+    bad = engine.submit(_payload(scans[3], time=1.7e18), "radar-1", "t").result(timeout=10)
+    assert bad.error is not None and bad.error["error"] == "time_jump"
+    assert "ingest.max_time_jump = 3600.0 s" in bad.error["detail"]
+    assert engine.latest_report_bytes() == before
+    assert all(r.accepted for r in _run(engine, [_payload(s) for s in scans[3:6]]))
+    # a jump within max_time_jump is a pause, not an error
+    later = engine.submit(_payload(scans[6], time=scans[5].time + 3000.0), "radar-1", "t")
+    assert later.result(timeout=10).accepted
+
+
+def test_max_time_jump_counts_the_wall_time_waited(sink: ListSink, scans: list[Any]) -> None:
+    eng = Engine(sink=sink, ingest=IngestConfig(max_time_jump=1.0))
+    eng.start()
+    try:
+        _run(eng, [_payload(scans[0])])
+        r = eng.submit(_payload(scans[1], time=scans[0].time + 5.0), "radar-1", "t")
+        assert r.result(timeout=10).error["error"] == "time_jump"  # type: ignore[index]
+        time.sleep(0.5)  # 5 s ahead after 0.5 s of waiting: still too far
+        r = eng.submit(_payload(scans[1], time=scans[0].time + 5.0), "radar-1", "t")
+        assert r.result(timeout=10).error["error"] == "time_jump"  # type: ignore[index]
+        r = eng.submit(_payload(scans[1], time=scans[0].time + 1.4), "radar-1", "t")
+        assert r.result(timeout=10).accepted
+    finally:
+        eng.stop()
 
 
 def test_too_many_detections(sink: ListSink, scans: list[Any]) -> None:
@@ -240,6 +279,10 @@ def test_config_patch_applies_on_next_batch_and_saves(
             eng.patch_config({"track_management": {"pd": 1.5}})
         with pytest.raises(ConfigError, match=r"ingest\.reorder_window"):
             eng.patch_config({"ingest": {"reorder_window": -1}})
+        with pytest.raises(ConfigError, match=r"ingest\.reorder_window"):
+            eng.patch_config({"ingest": {"reorder_window": 1e10}})  # > 1 hour
+        with pytest.raises(ConfigError, match=r"ingest\.max_time_jump"):
+            eng.patch_config({"ingest": {"max_time_jump": 0}})
         with pytest.raises(ConfigError, match="unknown"):
             eng.replace_config({"nonsense": {}})
         assert path.read_bytes() == saved and eng.config_document() == doc
@@ -331,6 +374,28 @@ class BrokenPipeline(TrackingPipeline):
         if scan.time == 3.0:
             raise RuntimeError("boom")
         return super().process(scan)
+
+
+class UnconfigurablePipeline(TrackingPipeline):
+    def reconfigure(self, config: TrackerConfig) -> None:
+        raise RuntimeError("cannot reconfigure")
+
+
+def test_a_failure_between_batches_refuses_the_batch_and_the_worker_survives(
+    sink: ListSink, scans: list[Any]
+) -> None:
+    eng = Engine(sink=sink, pipeline_factory=UnconfigurablePipeline)
+    eng.start()
+    try:
+        assert _run(eng, [_payload(scans[0])])[0].accepted
+        eng.patch_config({"track_management": {"pd": 0.8}})
+        r = _run(eng, [_payload(scans[1])])[0]
+        assert r.error is not None and r.error["error"] == "internal_error"
+        assert "cannot reconfigure" in r.error["detail"]
+        assert eng.running
+        assert _run(eng, [_payload(scans[2])])[0].accepted
+    finally:
+        eng.stop()
 
 
 def test_a_tracker_failure_is_reported_and_the_worker_survives(

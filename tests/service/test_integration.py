@@ -77,6 +77,9 @@ def test_tracks_over_zenoh_queryable_liveliness_and_rest(
         assert replies[0].ok is not None
         every = orjson.loads(replies[0].ok.payload.to_bytes())
         assert len(every["tracks"]) > len(last["tracks"])
+        replies = list(peer.get("tracking/state/tracks?status=bogus", timeout=5))
+        assert len(replies) == 1 and replies[0].err is not None
+        assert "status: one of confirmed, tentative, all" in replies[0].err.payload.to_string()
         assert {t["status"] for t in every["tracks"]} == {"confirmed", "tentative"}
 
         # the liveliness token
@@ -242,7 +245,11 @@ def test_rest_config(service: RunningService, peer: zenoh.Session) -> None:
     try:
         with httpx.Client(base_url=service.url, timeout=10) as http:
             doc = http.get("/api/v1/config").json()
-            assert doc["ingest"] == {"max_detections_per_batch": 10000, "reorder_window": 0.0}
+            assert doc["ingest"] == {
+                "max_detections_per_batch": 10000,
+                "reorder_window": 0.0,
+                "max_time_jump": 3600.0,
+            }
             assert "track_management" in doc and "measurement" in doc
             patch = {"ingest": {"max_detections_per_batch": 10}}
 

@@ -131,6 +131,7 @@ def test_settings_model_is_the_one_place() -> None:
         "ingest_queue_size",
         "max_detections_per_batch",
         "reorder_window",
+        "max_time_jump",
         "tracks_congestion_control",
         "log_level",
         "demo",

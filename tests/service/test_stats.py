@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from service.schemas import ERROR_REASONS
 from service.stats import WINDOW, Stats
 
 from .test_integration import parse_prometheus
@@ -39,6 +40,14 @@ def test_snapshot_and_prometheus() -> None:
     samples = parse_prometheus(stats.prometheus())
     assert samples["tracker_batches_received_total"] == 2
     assert samples['tracker_batches_rejected_total{reason="invalid_batch"}'] == 2
+    # every reason has its series from the start, and no made-up ones
+    reasons = {k for k in samples if k.startswith("tracker_batches_rejected_total{")}
+    assert reasons == {
+        f'tracker_batches_rejected_total{{reason="{r}"}}'
+        for r in ERROR_REASONS
+        if r != "overloaded"
+    }
+    assert samples['tracker_batches_rejected_total{reason="time_jump"}'] == 0
     assert samples["tracker_batches_dropped_total"] == 1
     assert samples["tracker_received_bytes_total"] == 150
     assert samples['tracker_tracks{status="tentative"}'] == 9

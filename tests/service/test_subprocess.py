@@ -152,6 +152,33 @@ def test_restart_keeps_the_configuration(processes: list[ServiceProcess], tmp_pa
     assert code == 0, err
 
 
+def test_sigterm_answers_a_rest_batch_held_by_the_reorder_window(
+    processes: list[ServiceProcess],
+) -> None:
+    """A POST waiting on the engine gets its answer during shutdown, not a cancelled task."""
+    import threading
+
+    svc = _start(processes, "--api-token", "tok", "--reorder-window", "30")
+    batch = simulate(reference_scenario(0))[0].to_batch()
+    answer: list[httpx.Response] = []
+    post = threading.Thread(
+        target=lambda: answer.append(
+            httpx.post(svc.url + "/api/v1/detections", json=batch, timeout=20)
+        )
+    )
+    post.start()
+    wait_until(
+        lambda: httpx.get(svc.url + "/api/v1/stats").json()["held_for_reorder"] == 1,
+        what="the batch held for reordering",
+    )
+    code, elapsed, _, err = svc.terminate()
+    post.join(10)
+    assert code == 0 and elapsed < 3.0, err
+    assert answer and answer[0].status_code == 202, answer and answer[0].text
+    assert answer[0].json() == {"accepted": True, "seq": 1}
+    assert "Traceback" not in err
+
+
 def test_generated_token_is_printed_once_and_works(processes: list[ServiceProcess]) -> None:
     svc = _start(processes)
     assert httpx.patch(svc.url + "/api/v1/config", json={}).status_code == 401
@@ -180,6 +207,7 @@ def test_generated_token_is_printed_once_and_works(processes: list[ServiceProces
         ([], {"TRACKER_HTTP_PORT": "eighty"}, "TRACKER_HTTP_PORT"),
         ([], {"TRACKER_ZENOH_LISTEN": "localhost"}, "zenoh_listen"),
         (["--reorder-window", "-1"], {}, "reorder_window"),
+        ([], {"TRACKER_MAX_TIME_JUMP": "inf"}, "max_time_jump"),
         (["--key-prefix", "a/**"], {}, "key_prefix"),
         (["--settings-file", "/nonexistent/settings.toml"], {}, "settings file"),
         (["--no-such-flag"], {}, "unrecognized arguments"),

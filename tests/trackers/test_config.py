@@ -1,4 +1,5 @@
 import json
+import re
 
 import pytest
 
@@ -31,11 +32,18 @@ def test_merged_changes_only_the_patched_field():
         ({"gating": {"nope": 1.0}}, "gating"),
         ({"measurement": {"position_std": "ten"}}, "measurement.position_std"),
         ({"measurement": {"position_std": True}}, "measurement.position_std"),
+        ({"track_management": {"pd": "0.8"}}, "track_management.pd: expected a number"),
+        ({"track_management": {"pd": [0.8]}}, "track_management.pd: expected a number"),
+        ({"motion": {"sojourn_times": ["30", "10"]}}, "motion.sojourn_times[0]: expected a number"),
+        ({"motion": {"sojourn_times": [True, True]}}, "motion.sojourn_times[0]: expected a number"),
+        ({"motion": {"initial_mode_probabilities": 1.0}}, "motion.initial_mode_probabilities"),
+        ({"motion": {"models": "cv"}}, "motion.models: expected a list"),
+        ({"motion": {"models": ["cv", 2]}}, "motion.models[1]: expected a string"),
         ({"initiation": 3}, "initiation"),
     ],
 )
 def test_invalid_values_name_the_field(patch, field):
-    with pytest.raises(ValueError, match=field.replace(".", r"\.")):
+    with pytest.raises(ValueError, match=re.escape(field)):
         TrackerConfig().merged(patch)
 
 
