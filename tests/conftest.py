@@ -96,7 +96,7 @@ def start_service(**overrides: Any) -> RunningService:
         time.sleep(0.01)
     return RunningService(
         url=f"http://127.0.0.1:{hport}",
-        endpoint=settings.zenoh_listen[0],
+        endpoint=(settings.zenoh_listen or settings.zenoh_connect)[0],
         token=SERVICE_TOKEN,
         prefix=settings.key_prefix,
         app=app,

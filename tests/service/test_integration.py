@@ -419,3 +419,52 @@ def test_custom_prefix_and_reorder_window(service_factory: Any) -> None:
         reports.close()
     finally:
         session.close()
+
+
+def _open(mode: str, *, listen: list[str] | None = None, connect: list[str] | None = None) -> Any:
+    conf = zenoh.Config()
+    conf.insert_json5("mode", json.dumps(mode))
+    conf.insert_json5("listen/endpoints", json.dumps(listen or []))
+    conf.insert_json5("connect/endpoints", json.dumps(connect or []))
+    conf.insert_json5("scouting/multicast/enabled", "false")
+    return zenoh.open(conf)
+
+
+def _round_trip(session: zenoh.Session, n: int = 5) -> None:
+    """Publish ``n`` scans from ``session`` and read their reports back on it."""
+    reports = Collector(session, "tracking/tracks")
+    try:
+        _publish(session, SCANS[:n])
+        got = reports.wait_for(n, timeout=20)
+        assert [orjson.loads(p)["seq"] for _, p in got] == list(range(1, n + 1))
+        replies = list(session.get("tracking/state/tracks", timeout=5))
+        assert len(replies) == 1 and replies[0].ok is not None
+        assert orjson.loads(replies[0].ok.payload.to_bytes())["seq"] == n
+    finally:
+        reports.close()
+
+
+def test_service_as_a_router_serves_zenoh_clients(service_factory: Any) -> None:
+    svc = service_factory(zenoh_mode="router")
+    client = _open("client", connect=[svc.endpoint])
+    try:
+        _round_trip(client)
+    finally:
+        client.close()
+
+
+def test_service_as_a_client_of_a_router(service_factory: Any) -> None:
+    """The service and a sensor are both clients of a router; nothing connects them directly."""
+    from tests.conftest import free_port
+
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    router = _open("router", listen=[endpoint])
+    try:
+        service_factory(zenoh_mode="client", zenoh_connect=endpoint, zenoh_listen="none")
+        sensor = _open("client", connect=[endpoint])
+        try:
+            _round_trip(sensor)
+        finally:
+            sensor.close()
+    finally:
+        router.close()
