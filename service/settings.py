@@ -26,6 +26,8 @@ from pydantic_settings import (
     SettingsConfigDict,
 )
 
+from service.schemas import MAX_REORDER_WINDOW
+
 __all__ = ["Settings", "SettingsLoadError", "build_parser", "load_settings", "split_endpoints"]
 
 _KEY_PREFIX_RE = re.compile(r"^[^/*$#?\s]+(/[^/*$#?\s]+)*$")
@@ -110,7 +112,10 @@ class Settings(BaseSettings):
         default=10000, ge=1, description="default of the config's ingest.max_detections_per_batch"
     )
     reorder_window: float = Field(
-        default=0.0, ge=0, le=3600, description="default of the config's ingest.reorder_window, s"
+        default=0.0,
+        ge=0,
+        le=MAX_REORDER_WINDOW,
+        description="default of the config's ingest.reorder_window, s",
     )
     max_time_jump: float = Field(
         default=3600.0,

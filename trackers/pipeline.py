@@ -39,7 +39,7 @@ __all__ = [
 #: Largest |x| or |y| a detection may have (m): far beyond any sensor of a local frame, and
 #: small enough that squared distances and covariances stay finite in double precision.
 MAX_ABS_POSITION = 1e9
-#: Largest variance a detection covariance may have (m²): a standard deviation of 10,000 km.
+#: Largest magnitude of a detection covariance entry (m²): a standard deviation of 10,000 km.
 MAX_VARIANCE = 1e14
 
 
