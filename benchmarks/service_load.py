@@ -16,6 +16,7 @@ the REST latency percentiles, against the targets (≥ 200 batches/s, nothing lo
 from __future__ import annotations
 
 import argparse
+import math
 import os
 import re
 import signal
@@ -113,6 +114,16 @@ def run_phase(
     )
 
 
+def rss_mb(pid: int) -> float:
+    """Resident set size of process ``pid`` in MB (Linux ``/proc``; NaN elsewhere)."""
+    try:
+        status = Path(f"/proc/{pid}/status").read_text()
+    except OSError:
+        return float("nan")
+    m = re.search(r"^VmRSS:\s+(\d+) kB", status, re.MULTILINE)
+    return int(m.group(1)) / 1024 if m else float("nan")
+
+
 def ingest_cost(repeats: int = 2000) -> tuple[float, int]:
     """Median milliseconds to decode, validate and convert one reference batch (JSON bytes to
     tracker arrays), as the engine does for each batch; and the batch's detection count."""
@@ -140,6 +151,12 @@ def main(argv: list[str] | None = None) -> int:
     )
     parser.add_argument("--rate", type=float, default=200.0, help="paced phase, batches/s")
     parser.add_argument("--seconds", type=float, default=15.0, help="length of each phase")
+    parser.add_argument(
+        "--rounds",
+        type=int,
+        default=1,
+        help="max-rate phases one after another (a soak: watch the service's memory)",
+    )
     args = parser.parse_args(argv)
 
     http_port, zenoh_port = free_port(), free_port()
@@ -178,10 +195,16 @@ def main(argv: list[str] | None = None) -> int:
                     raise RuntimeError("the service did not start")
                 time.sleep(0.1)
             scans = int(args.rate * args.seconds)
+            rss = [("started", rss_mb(service.pid))]
             phases = [
-                run_phase(f"paced {args.rate:.0f}/s", client, endpoint, scans, args.rate, 0.0),
-                run_phase("max rate", client, endpoint, scans, None, float(scans) + 10.0),
+                run_phase(f"paced {args.rate:.0f}/s", client, endpoint, scans, args.rate, 0.0)
             ]
+            rss.append((phases[-1].name, rss_mb(service.pid)))
+            for k in range(1, args.rounds + 1):
+                name = "max rate" if args.rounds == 1 else f"max rate {k}"
+                offset = k * (float(scans) + 10.0)
+                phases.append(run_phase(name, client, endpoint, scans, None, offset))
+                rss.append((name, rss_mb(service.pid)))
     finally:
         service.send_signal(signal.SIGTERM)
         try:
@@ -207,7 +230,11 @@ def main(argv: list[str] | None = None) -> int:
             f"{p.rate:>10.1f}{p.tracker_p50:>11.2f}/{p.tracker_p99:<8.2f}"
             f"{np.percentile(g, 50):>9.2f}/{np.percentile(g, 99):.2f}/{g.max():.1f}"
         )
-    ok_rate = phases[1].rate >= 200 and phases[0].rate >= 0.97 * args.rate
+    print(
+        "   service resident memory: "
+        + ", ".join(f"{name} {mb:.0f} MB" for name, mb in rss if not math.isnan(mb))
+    )
+    ok_rate = min(p.rate for p in phases[1:]) >= 200 and phases[0].rate >= 0.97 * args.rate
     lost = any(p.processed != p.published or p.dropped or p.rejected for p in phases)
     p99 = max(float(np.percentile(p.get_ms, 99)) for p in phases)
     print(

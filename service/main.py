@@ -88,6 +88,7 @@ class ServiceRuntime:
                 filtered=self.engine.tracks,
                 congestion_control=s.tracks_congestion_control,
                 config_file=s.zenoh_config_file,
+                shared_memory=s.zenoh_shared_memory,
             )
             self.engine.start()
             try:

@@ -83,6 +83,14 @@ class Settings(BaseSettings):
         default=None,
         description="a Zenoh JSON5 config file to start from (mode/endpoints override it)",
     )
+    zenoh_shared_memory: bool = Field(
+        default=False,
+        description=(
+            "Zenoh's shared-memory transport with peers on this host (off by default: the "
+            "service kept each local publisher's 16 MB pool mapped after it left, ~20 MB of "
+            "memory per publisher run)"
+        ),
+    )
     key_prefix: str = Field(
         default="tracking", description="first chunk(s) of every key expression"
     )

@@ -35,8 +35,10 @@ def make_config(
     *,
     config_file: Path | None = None,
     multicast_scouting: bool = False,
+    shared_memory: bool = False,
 ) -> zenoh.Config:
-    """A Zenoh config: ``mode``, endpoints, multicast scouting off unless asked for.
+    """A Zenoh config: ``mode``, endpoints, multicast scouting and the shared-memory transport
+    off unless asked for.
 
     ``config_file`` (JSON5) is the starting point when given; the other arguments override it.
     A client does not listen, so ``listen`` is ignored in client mode."""
@@ -47,6 +49,7 @@ def make_config(
     if connect or not config_file:
         conf.insert_json5("connect/endpoints", json.dumps(list(connect)))
     conf.insert_json5("scouting/multicast/enabled", "true" if multicast_scouting else "false")
+    conf.insert_json5("transport/shared_memory/enabled", "true" if shared_memory else "false")
     return conf
 
 
@@ -94,6 +97,7 @@ class ZenohIO:
         filtered: Callable[[str, set[str] | None], dict[str, Any]] | None = None,
         congestion_control: str = "block",
         config_file: Path | None = None,
+        shared_memory: bool = False,
     ) -> None:
         self.mode = mode
         self.listen = listen
@@ -109,6 +113,7 @@ class ZenohIO:
             else zenoh.CongestionControl.DROP
         )
         self._config_file = config_file
+        self._shared_memory = shared_memory
         self._lock = threading.Lock()
         self._closed = True
         self.session: zenoh.Session | None = None
@@ -141,7 +146,13 @@ class ZenohIO:
     def open(self) -> None:
         """Open the session and declare everything; raises ``zenoh.ZError`` on failure (for
         example when a listen port is taken), leaving nothing open."""
-        conf = make_config(self.mode, self.listen, self.connect, config_file=self._config_file)
+        conf = make_config(
+            self.mode,
+            self.listen,
+            self.connect,
+            config_file=self._config_file,
+            shared_memory=self._shared_memory,
+        )
         session = zenoh.open(conf)
         try:
             self._tracks_pub = session.declare_publisher(
