@@ -91,7 +91,14 @@ class MeasurementConfig:
 @dataclass(frozen=True)
 class InitiationConfig:
     """A new tentative track starts at its detection with zero velocity of std
-    ``velocity_std`` (m/s) per axis and zero turn rate of std ``turn_rate_std`` (rad/s)."""
+    ``velocity_std`` (m/s) per axis and zero turn rate of std ``turn_rate_std`` (rad/s).
+
+    The second detection must fall in the gate of that prior: a target moving faster than
+    about ``sqrt(γ) · velocity_std`` m/s (γ the gate threshold, ≈ 4.3 · velocity_std at the
+    default gate) per second of revisit never pairs its detections and is not initiated. The
+    default suits ground and sea targets; set it to about a third of the fastest speed
+    expected (e.g. 100 m/s for aircraft), at the price of wider gates for new tracks in
+    clutter."""
 
     velocity_std: float = 15.0
     turn_rate_std: float = 0.05

@@ -267,6 +267,7 @@ def _turn_functions(
     For ``|φ| < 0.3`` a, b, a', b' come from their Taylor series (six terms), so they are
     finite and smooth through φ = 0, where ``a = 1``, ``b = 0``, ``a' = 0``, ``b' = 1/2``.
     """
+    phi = np.asarray(phi, dtype=float)
     s = np.sin(phi)
     c = np.cos(phi)
     small = np.abs(phi) < _SERIES_LIMIT
@@ -288,6 +289,7 @@ def _turn_functions(
             series *= p
             series += _TURN_SERIES[:, k, None]
         series[1:3] *= phi
+        series = series.reshape(4, *phi.shape)  # a 0-d φ came back as (4, 1)
         if n_small == small.size:
             return s, c, series[0], series[1], series[2], series[3]
         a = np.where(small, series[0], a)

@@ -172,6 +172,18 @@ def test_ct_transition_known_quarter_turn() -> None:
     np.testing.assert_allclose(fx[0], [100.0 + r, -50.0 + r, 0.0, 10.0, math.pi / 2], atol=1e-12)
 
 
+@pytest.mark.parametrize("omega", [0.0, 1e-3, 0.29, 0.31, 1.0])
+def test_ct_single_state_equals_a_batch_of_one(omega: float) -> None:
+    """One state without a batch axis, on both sides of the series/closed-form switch."""
+    model = CoordinatedTurn(1.0, 0.01)
+    x = np.array([10.0, 20.0, 3.0, -4.0, omega])
+    fx, F = model.transition(x, 1.0)
+    fb, Fb = model.transition(x[None], 1.0)
+    assert fx.shape == (5,) and F.shape == (5, 5)
+    np.testing.assert_array_equal(fx, fb[0])
+    np.testing.assert_array_equal(F, Fb[0])
+
+
 def numerical_jacobian(model: CoordinatedTurn, x: np.ndarray, dt: float) -> np.ndarray:
     """Central differences, one column per state component (step scaled to the component)."""
     J = np.empty((5, 5))
