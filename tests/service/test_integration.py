@@ -15,7 +15,8 @@ import pytest
 import zenoh
 
 from clients.scenarios.multitarget import reference_scenario, simulate
-from tests.conftest import RunningService
+from clients.zenoh_session import open_session
+from tests.conftest import RunningService, free_port
 
 from .helpers import (
     Collector,
@@ -421,15 +422,6 @@ def test_custom_prefix_and_reorder_window(service_factory: Any) -> None:
         session.close()
 
 
-def _open(mode: str, *, listen: list[str] | None = None, connect: list[str] | None = None) -> Any:
-    conf = zenoh.Config()
-    conf.insert_json5("mode", json.dumps(mode))
-    conf.insert_json5("listen/endpoints", json.dumps(listen or []))
-    conf.insert_json5("connect/endpoints", json.dumps(connect or []))
-    conf.insert_json5("scouting/multicast/enabled", "false")
-    return zenoh.open(conf)
-
-
 def _round_trip(session: zenoh.Session, n: int = 5) -> None:
     """Publish ``n`` scans from ``session`` and read their reports back on it."""
     reports = Collector(session, "tracking/tracks")
@@ -446,7 +438,7 @@ def _round_trip(session: zenoh.Session, n: int = 5) -> None:
 
 def test_service_as_a_router_serves_zenoh_clients(service_factory: Any) -> None:
     svc = service_factory(zenoh_mode="router")
-    client = _open("client", connect=[svc.endpoint])
+    client = open_session("client", connect=[svc.endpoint])
     try:
         _round_trip(client)
     finally:
@@ -455,13 +447,11 @@ def test_service_as_a_router_serves_zenoh_clients(service_factory: Any) -> None:
 
 def test_service_as_a_client_of_a_router(service_factory: Any) -> None:
     """The service and a sensor are both clients of a router; nothing connects them directly."""
-    from tests.conftest import free_port
-
     endpoint = f"tcp/127.0.0.1:{free_port()}"
-    router = _open("router", listen=[endpoint])
+    router = open_session("router", connect=[], listen=[endpoint])
     try:
         service_factory(zenoh_mode="client", zenoh_connect=endpoint, zenoh_listen="none")
-        sensor = _open("client", connect=[endpoint])
+        sensor = open_session("client", connect=[endpoint])
         try:
             _round_trip(sensor)
         finally:

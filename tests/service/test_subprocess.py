@@ -8,6 +8,7 @@ import re
 import signal
 import subprocess
 import sys
+import threading
 import time
 from collections.abc import Iterator
 from pathlib import Path
@@ -156,8 +157,6 @@ def test_sigterm_answers_a_rest_batch_held_by_the_reorder_window(
     processes: list[ServiceProcess],
 ) -> None:
     """A POST waiting on the engine gets its answer during shutdown, not a cancelled task."""
-    import threading
-
     svc = _start(processes, "--api-token", "tok", "--reorder-window", "30")
     batch = simulate(reference_scenario(0))[0].to_batch()
     answer: list[httpx.Response] = []
