@@ -308,7 +308,8 @@ def bench_crb(runs: int, n_scans: int) -> None:
     )
     base = {
         "motion": {"q_cv": q},
-        "initiation": {"velocity_std": v_std},
+        # The PCRB assumes the Gaussian velocity prior of a single-point start.
+        "initiation": {"method": "single_point", "velocity_std": v_std},
         "track_management": {"pd": 1.0 - 1e-9},
     }
     imm = TrackerConfig().merged(base)

@@ -13,6 +13,7 @@ from dataclasses import asdict, dataclass, field, fields, is_dataclass
 from typing import Any, get_args, get_origin, get_type_hints
 
 __all__ = [
+    "INITIATION_METHODS",
     "GatingConfig",
     "InitiationConfig",
     "MeasurementConfig",
@@ -25,6 +26,11 @@ __all__ = [
 def _positive(name: str, value: float) -> None:
     if not (isinstance(value, int | float) and math.isfinite(value) and value > 0):
         raise ValueError(f"{name}: must be a finite number > 0, got {value!r}")
+
+
+def _at_most(name: str, value: float, limit: float) -> None:
+    if value > limit:
+        raise ValueError(f"{name}: must be at most {limit:g}, got {value!r}")
 
 
 def _probability(name: str, value: float, *, include_one: bool = False) -> None:
@@ -49,7 +55,7 @@ class MotionConfig:
     models: tuple[str, ...] = ("cv", "ct")
     q_cv: float = 0.5
     q_ct: float = 2.0
-    q_turn_rate: float = 1e-4
+    q_turn_rate: float = 1e-3
     sojourn_times: tuple[float, ...] = (30.0, 10.0)
     initial_mode_probabilities: tuple[float, ...] = (0.9, 0.1)
 
@@ -88,24 +94,57 @@ class MeasurementConfig:
         _positive("measurement.position_std", self.position_std)
 
 
+INITIATION_METHODS = ("two_point", "single_point")
+
+
 @dataclass(frozen=True)
 class InitiationConfig:
-    """A new tentative track starts at its detection with zero velocity of std
-    ``velocity_std`` (m/s) per axis and zero turn rate of std ``turn_rate_std`` (rad/s).
+    """How new tracks start (see :mod:`trackers.initiation`).
 
-    The second detection must fall in the gate of that prior: a target moving faster than
-    about ``sqrt(γ) · velocity_std`` m/s (γ the gate threshold, ≈ 4.3 · velocity_std at the
-    default gate) per second of revisit never pairs its detections and is not initiated. The
-    default suits ground and sea targets; set it to about a third of the fastest speed
-    expected (e.g. 100 m/s for aircraft), at the price of wider gates for new tracks in
-    clutter."""
+    ``method`` ``"two_point"`` (the default) is the velocity-gated two-point initiation of
+    Blackman and Popoli: a free detection opens a *candidate*; a free detection of a later scan
+    within ``max_speed · Δt`` (plus the gate) of it gives it a velocity and starts a tentative
+    track, scored by the LLR and confirmed or deleted by the sequential test. The velocity
+    prior of a pair is a mixture: with probability ``slow_target_fraction`` a slow target,
+    ``N(0, velocity_std²)`` per axis, otherwise any velocity up to ``max_speed`` (m/s),
+    uniform over the disc. A candidate is offered to the scans of the next
+    ``candidate_max_age`` seconds and makes at most ``max_pairs_per_candidate`` tracks a scan
+    (the likeliest), so the number of new tracks stays bounded in dense clutter.
 
+    ``method`` ``"single_point"`` starts a tentative track at each free detection with zero
+    velocity of std ``velocity_std`` per axis: it cannot start a target moving much faster than
+    ``sqrt(γ) · velocity_std`` per second of revisit (γ the gate threshold).
+
+    Either way a new track has turn rate 0 with std ``turn_rate_std`` (rad/s).
+    """
+
+    method: str = "two_point"
+    max_speed: float = 700.0
     velocity_std: float = 15.0
+    slow_target_fraction: float = 0.8
     turn_rate_std: float = 0.05
+    candidate_max_age: float = 12.0
+    max_pairs_per_candidate: int = 8
 
     def __post_init__(self) -> None:
+        if self.method not in INITIATION_METHODS:
+            raise ValueError(
+                f"initiation.method: one of {list(INITIATION_METHODS)}, got {self.method!r}"
+            )
+        _positive("initiation.max_speed", self.max_speed)
+        _at_most("initiation.max_speed", self.max_speed, 1e5)
         _positive("initiation.velocity_std", self.velocity_std)
+        _at_most("initiation.velocity_std", self.velocity_std, 1e5)
+        _probability("initiation.slow_target_fraction", self.slow_target_fraction)
         _positive("initiation.turn_rate_std", self.turn_rate_std)
+        _at_most("initiation.turn_rate_std", self.turn_rate_std, 10.0)
+        _positive("initiation.candidate_max_age", self.candidate_max_age)
+        _at_most("initiation.candidate_max_age", self.candidate_max_age, 3600.0)
+        n = self.max_pairs_per_candidate
+        if not (isinstance(n, int) and not isinstance(n, bool) and 1 <= n <= 1000):
+            raise ValueError(
+                f"initiation.max_pairs_per_candidate: an integer in [1, 1000], got {n!r}"
+            )
 
 
 @dataclass(frozen=True)
@@ -227,6 +266,12 @@ def _typed(hint: Any, value: Any, path: str) -> Any:
         if isinstance(value, int | float) and not isinstance(value, bool):
             return float(value)
         raise ValueError(f"{path}: expected a number, got {value!r}")
+    if hint is int:
+        if isinstance(value, int) and not isinstance(value, bool):
+            return value
+        if isinstance(value, float) and value.is_integer():
+            return int(value)
+        raise ValueError(f"{path}: expected an integer, got {value!r}")
     if hint is str:
         if isinstance(value, str):
             return value

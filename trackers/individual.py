@@ -30,6 +30,13 @@ from trackers.association.gating import gate
 from trackers.association.gnn import gnn_assign
 from trackers.config import TrackerConfig
 from trackers.filters.imm import imm_combine, imm_predict, imm_update, transition_matrix
+from trackers.initiation import (
+    MIN_PAIR_INTERVAL,
+    Candidates,
+    Pairs,
+    pair_candidates,
+    third_detections,
+)
 from trackers.models.measurement import H_POSITION
 from trackers.models.motion import STATE_DIM, build_models
 from trackers.scoring import hit_increment, initial_score, miss_increment, sequential_test
@@ -49,6 +56,9 @@ class TrackArrays:
 
     x (N, M, 5), P (N, M, 5, 5), mu (N, M): the IMM mode-conditioned estimates and mode
     probabilities; x_comb (N, 5) and P_comb (N, 5, 5) their moment-matched combination.
+    ``origin`` numbers the detection a track started from: tracks of one origin are rival
+    hypotheses of one target's start, of which only the likeliest is kept once each has
+    been tested against a scan.
     """
 
     ids: np.ndarray
@@ -64,6 +74,7 @@ class TrackArrays:
     created: np.ndarray
     updated: np.ndarray
     detection_ids: np.ndarray
+    origin: np.ndarray
 
     @staticmethod
     def empty(n_modes: int) -> TrackArrays:
@@ -82,6 +93,7 @@ class TrackArrays:
             created=np.zeros(0),
             updated=np.zeros(0),
             detection_ids=np.zeros(0, dtype=object),
+            origin=np.zeros(0, dtype=np.int64),
         )
 
     def __len__(self) -> int:
@@ -120,8 +132,11 @@ class IndividualTracker:
         self._pending: TrackerConfig | None = None
         self._models = build_models(self._config.motion)
         self._tracks = TrackArrays.empty(len(self._models))
+        self._candidates = Candidates.empty()
+        self._pairs = Pairs.empty()
         self._time: float | None = None
         self._next_id = itertools.count(1)
+        self._next_origin = 0
 
     # -- configuration -------------------------------------------------------------------
 
@@ -170,8 +185,15 @@ class IndividualTracker:
             tracks, explained = self._update_existing(
                 tracks, models, config, scan, dt, pd_sensor, lam_fa, cells
             )
+            tracks = tracks.take(_best_of_each_origin(tracks))
 
-        born = self._initiate(scan, ~explained, config, lam_fa)
+        if config.initiation.method == "two_point":
+            born, candidates, pairs = self._initiate_two_point(
+                scan, ~explained, config, pd_sensor, lam_fa
+            )
+        else:
+            born = self._initiate(scan, ~explained, config, lam_fa)
+            candidates, pairs = Candidates.empty(), Pairs.empty()
         n_old = len(tracks)
         tracks = tracks.concat(born)
 
@@ -187,6 +209,8 @@ class IndividualTracker:
         # Commit: nothing above touched self.
         self._config, self._models, self._pending = config, models, None
         self._tracks = tracks
+        self._candidates = candidates
+        self._pairs = pairs
         self._time = t
         state = (tracks, tuple(m.name for m in models), t)
         return StepResult(
@@ -273,6 +297,114 @@ class IndividualTracker:
         )
         return new, assigned
 
+    def _initiate_two_point(
+        self, scan: Scan, free: np.ndarray, config: TrackerConfig, pd: float, lam_fa: float
+    ) -> tuple[TrackArrays, Candidates, Pairs]:
+        """Velocity-gated two-point initiation (:mod:`trackers.initiation`).
+
+        Pairs of earlier scans that meet a third free detection start tentative tracks; the
+        candidates of earlier scans pair with the free detections left; every free detection
+        becomes a candidate. Returns the new tracks and the candidates and pairs to keep."""
+        init, tm = config.initiation, config.track_management
+        t = float(scan.time)
+        miss = float(miss_increment(pd))
+        gamma = config.gating.threshold
+        q = config.motion.q_cv
+
+        pairs = self._pairs
+        pairs = pairs.take(t - pairs.time <= init.candidate_max_age)
+        third = third_detections(
+            pairs, scan.z, scan.R, free, t, q=q, gamma=gamma, pd=pd, clutter_density=lam_fa
+        )
+        free_left = free.copy()
+        free_left[third.detection] = False
+        # A pair not extended goes on as its missed branch; rivals of an extended pair (the
+        # same first detection) are dropped.
+        offered = t - pairs.time >= MIN_PAIR_INTERVAL
+        score = np.where(offered, pairs.score + miss, pairs.score)
+        keep = (score > tm.delete_threshold) & ~np.isin(pairs.origin, pairs.origin[third.pair])
+        pairs = replace(pairs, score=score).take(keep)
+
+        cand = self._candidates
+        cand = cand.take(t - cand.time <= init.candidate_max_age)
+        two = pair_candidates(
+            cand,
+            scan.z,
+            scan.R,
+            free_left,
+            t,
+            max_speed=init.max_speed,
+            velocity_std=init.velocity_std,
+            slow_fraction=init.slow_target_fraction,
+            q=q,
+            gamma=gamma,
+            max_pairs=init.max_pairs_per_candidate,
+            pd=pd,
+            clutter_density=lam_fa,
+            min_score=tm.delete_threshold,
+        )
+        new_pairs = Pairs(
+            x=two.x,
+            P=two.P,
+            time=np.full(two.size, t),
+            score=two.score,
+            origin=cand.origin[two.candidate],
+            created=cand.time[two.candidate],
+            detection_ids=_objects([scan.detection_ids[j] for j in two.detection.tolist()]),
+        )
+        offered = t - cand.time >= MIN_PAIR_INTERVAL
+        score = np.where(offered, cand.score + miss, cand.score)
+        cand = replace(cand, score=score).take(score > tm.delete_threshold)
+
+        idx = np.flatnonzero(free_left)
+        L1 = initial_score(tm.new_target_density, lam_fa)
+        fresh = Candidates(
+            z=scan.z[idx],
+            R=scan.R[idx],
+            time=np.full(idx.size, t),
+            score=np.full(idx.size, L1),
+            detection_ids=_objects([scan.detection_ids[j] for j in idx.tolist()]),
+            origin=np.arange(self._next_origin, self._next_origin + idx.size, dtype=np.int64),
+        )
+        self._next_origin += idx.size
+        candidates = cand.concat(fresh)
+        pairs = pairs.concat(new_pairs)
+
+        M = len(config.motion.models)
+        n = third.size
+        if n == 0:
+            return TrackArrays.empty(M), candidates, pairs
+        x0 = np.zeros((n, STATE_DIM))
+        x0[:, :4] = third.x
+        P0 = np.zeros((n, STATE_DIM, STATE_DIM))
+        P0[:, :4, :4] = third.P
+        P0[:, 4, 4] = init.turn_rate_std**2
+        ids = _objects([f"T{next(self._next_id)}" for _ in range(n)])
+        det_ids = _objects(
+            [
+                () if scan.detection_ids[j] is None else (scan.detection_ids[j],)
+                for j in third.detection.tolist()
+            ]
+        )
+        source = self._pairs.take(t - self._pairs.time <= init.candidate_max_age)
+        born = TrackArrays(
+            ids=ids,
+            x=np.repeat(x0[:, None, :], M, axis=1),
+            P=np.repeat(P0[:, None, :, :], M, axis=1),
+            mu=np.tile(np.asarray(config.motion.initial_mode_probabilities), (n, 1)),
+            x_comb=x0,
+            P_comb=P0,
+            score=third.score,
+            peak=third.score.copy(),
+            confirmed=np.zeros(n, dtype=bool),
+            hits=np.full(n, 3, dtype=np.int64),
+            created=source.created[third.pair],
+            updated=np.full(n, t),
+            detection_ids=det_ids,
+            origin=source.origin[third.pair],
+        )
+        return born, candidates, pairs
+
     def _initiate(
         self, scan: Scan, free: np.ndarray, config: TrackerConfig, lam_fa: float
     ) -> TrackArrays:
@@ -292,6 +424,8 @@ class IndividualTracker:
         P0[:, 4, 4] = init.turn_rate_std**2
         L1 = initial_score(config.track_management.new_target_density, lam_fa)
         ids = _objects([f"T{next(self._next_id)}" for _ in range(n)])
+        origin = np.arange(self._next_origin, self._next_origin + n, dtype=np.int64)
+        self._next_origin += n
         det_ids = _objects(
             [
                 () if scan.detection_ids[j] is None else (scan.detection_ids[j],)
@@ -313,6 +447,7 @@ class IndividualTracker:
             created=np.full(n, t),
             updated=np.full(n, t),
             detection_ids=det_ids,
+            origin=origin,
         )
 
     # -- output --------------------------------------------------------------------------
@@ -327,6 +462,23 @@ class IndividualTracker:
         names = tuple(m.name for m in self._models)
         t = self._time if self._time is not None else 0.0
         return _snapshots(self._tracks, names, t, confirmed_only=confirmed_only)
+
+
+def _best_of_each_origin(tracks: TrackArrays) -> np.ndarray:
+    """Mask of the tracks to keep: every confirmed track, and of the tentative tracks that
+    share an origin (rival starts from one detection) only the one with the highest score,
+    unless a confirmed track of that origin exists."""
+    if not len(tracks):
+        return np.ones(0, dtype=bool)
+    # Sort by origin, then confirmed first, then by falling score: the first of each origin
+    # is its best hypothesis.
+    order = np.lexsort((-tracks.score, ~tracks.confirmed, tracks.origin))
+    o = tracks.origin[order]
+    first = np.ones(o.size, dtype=bool)
+    first[1:] = o[1:] != o[:-1]
+    keep = np.zeros(len(tracks), dtype=bool)
+    keep[order] = first
+    return keep | tracks.confirmed
 
 
 def _snapshots(

@@ -252,6 +252,10 @@ def test_rest_config(service: RunningService, peer: zenoh.Session) -> None:
                 "max_time_jump": 3600.0,
             }
             assert "track_management" in doc and "measurement" in doc
+            # Targets of every speed start with the default configuration.
+            assert doc["initiation"]["method"] == "two_point"
+            assert doc["initiation"]["max_speed"] == 700.0
+            assert doc["initiation"]["max_pairs_per_candidate"] == 8
             patch = {"ingest": {"max_detections_per_batch": 10}}
 
             r = http.patch("/api/v1/config", json=patch)

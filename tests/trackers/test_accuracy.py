@@ -18,7 +18,8 @@ def test_position_rmse_is_within_ten_percent_of_the_pcrb():
     config = TrackerConfig().merged(
         {
             "motion": {"q_cv": Q},
-            "initiation": {"velocity_std": V_STD},
+            # The PCRB assumes the Gaussian velocity prior of a single-point start.
+            "initiation": {"method": "single_point", "velocity_std": V_STD},
             "track_management": {"pd": 1.0 - 1e-9},
         }
     )

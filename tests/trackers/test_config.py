@@ -40,6 +40,14 @@ def test_merged_changes_only_the_patched_field():
         ({"motion": {"models": "cv"}}, "motion.models: expected a list"),
         ({"motion": {"models": ["cv", 2]}}, "motion.models[1]: expected a string"),
         ({"initiation": 3}, "initiation"),
+        ({"initiation": {"method": "three_point"}}, "initiation.method"),
+        ({"initiation": {"max_speed": 0}}, "initiation.max_speed"),
+        ({"initiation": {"max_speed": 1e9}}, "initiation.max_speed"),
+        ({"initiation": {"slow_target_fraction": 1.0}}, "initiation.slow_target_fraction"),
+        ({"initiation": {"candidate_max_age": -1}}, "initiation.candidate_max_age"),
+        ({"initiation": {"max_pairs_per_candidate": 0}}, "initiation.max_pairs_per_candidate"),
+        ({"initiation": {"max_pairs_per_candidate": 2.5}}, "expected an integer"),
+        ({"initiation": {"max_pairs_per_candidate": True}}, "expected an integer"),
     ],
 )
 def test_invalid_values_name_the_field(patch, field):
@@ -52,3 +60,11 @@ def test_single_model_configuration_is_valid():
         {"motion": {"models": ["cv"], "sojourn_times": [10.0], "initial_mode_probabilities": [1.0]}}
     )
     assert c.motion.models == ("cv",)
+
+
+def test_integer_field_takes_an_integer_or_an_integral_number():
+    c = TrackerConfig().merged({"initiation": {"max_pairs_per_candidate": 3}})
+    assert c.initiation.max_pairs_per_candidate == 3
+    c = TrackerConfig().merged({"initiation": {"max_pairs_per_candidate": 4.0}})
+    assert c.initiation.max_pairs_per_candidate == 4
+    assert isinstance(c.initiation.max_pairs_per_candidate, int)

@@ -26,8 +26,13 @@ def scan_at(t, points, sensor="r1", pd=None, lam=None, sigma=SIGMA, ids=None):
     )
 
 
+#: These tests check the score arithmetic on tracks that start at one detection; two-point
+#: initiation (the default) has its own tests in test_initiation.py.
+SINGLE_POINT = {"initiation": {"method": "single_point"}}
+
+
 def config(**tm):
-    return TrackerConfig().merged({"track_management": tm} if tm else {})
+    return TrackerConfig().merged({**SINGLE_POINT, "track_management": tm})
 
 
 def test_single_target_is_confirmed_and_followed_by_one_track():

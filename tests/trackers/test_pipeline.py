@@ -9,6 +9,9 @@ from trackers.config import TrackerConfig
 from trackers.pipeline import PeerOutput, ResolutionCell, TrackingPipeline, check_scan
 from trackers.types import Scan, ScanRejected
 
+#: Tracks that start at one detection, so that one scan makes a track to look at.
+SINGLE_POINT = TrackerConfig().merged({"initiation": {"method": "single_point"}})
+
 
 def scan_at(t, points, R=None, **kw):
     z = np.asarray(points, dtype=float).reshape(-1, 2)
@@ -64,7 +67,7 @@ def state(p):
     ],
 )
 def test_bad_scans_are_rejected_and_change_nothing(scan, reason, text):
-    p = TrackingPipeline()
+    p = TrackingPipeline(SINGLE_POINT)
     p.process(scan_at(0.0, [[0, 0], [100, 100]]))
     p.process(scan_at(1.0, [[1, 0], [101, 100]]))
     before = state(p)
@@ -84,13 +87,13 @@ def test_equal_times_are_in_sequence():
 
 def test_claimed_detections_start_no_individual_track():
     peer = DiscClaimer(center=[0, 0], radius=50.0, pd_inside=0.1)
-    p = TrackingPipeline(peers=[peer])
+    p = TrackingPipeline(SINGLE_POINT, peers=[peer])
     res = p.process(scan_at(0.0, [[0, 0], [10, 10], [-20, 5], [500, 500]]))
     assert [t.position for t in res.tracks] == [(500.0, 500.0)]
 
 
 def test_resolution_cell_changes_individual_detection_probability_and_score():
-    cfg = TrackerConfig().merged({"track_management": {"pd": 0.9}})
+    cfg = SINGLE_POINT.merged({"track_management": {"pd": 0.9}})
     # A track at (0, 0) is started before the peer exists; then the peer masks it.
     plain = TrackingPipeline(cfg)
     hybrid = TrackingPipeline(cfg, peers=[DiscClaimer(center=[0, 0], radius=50.0, pd_inside=0.2)])
@@ -105,7 +108,7 @@ def test_resolution_cell_changes_individual_detection_probability_and_score():
 
 def test_peer_sees_individual_tracks_before_the_scan():
     peer = DiscClaimer(center=[1e6, 1e6], radius=1.0, pd_inside=0.5)
-    p = TrackingPipeline(peers=[peer])
+    p = TrackingPipeline(SINGLE_POINT, peers=[peer])
     p.process(scan_at(0.0, [[0, 0], [100, 0]]))
     p.process(scan_at(1.0, [[0, 0], [100, 0]]))
     assert peer.seen_individual == [0, 2]

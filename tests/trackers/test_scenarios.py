@@ -100,3 +100,44 @@ def test_two_sensors_are_fused():
     assert mean_gospa < 30.0
     assert missed + false <= 10
     assert cont.total_breaks + cont.total_swaps <= 3
+
+
+# --- targets of every speed, default configuration (clients.scenarios.airspace) ----------------
+
+
+def held(scenario):
+    from clients.scenarios.airspace import simulate_scripted
+    from trackers.evaluation.effective_rate import EffectiveRateCounter
+
+    pipeline = TrackingPipeline(TrackerConfig())
+    counter = EffectiveRateCounter(gate=150.0, warmup=8)
+    for sim in simulate_scripted(scenario):
+        confirmed = pipeline.process(sim.to_scan()).confirmed()
+        est = np.array([t.position for t in confirmed]).reshape(-1, 2)
+        counter.add(sim.truth_ids, sim.truth_states[:, :2], [t.id for t in confirmed], est)
+    return counter.result(scenario.classes)
+
+
+@pytest.mark.parametrize("period", [4.0, 1.0])
+def test_mixed_speeds_from_parked_cars_to_jets_are_held_with_defaults(period):
+    from clients.scenarios.airspace import mixed_speed_scenario
+
+    r = held(mixed_speed_scenario(period=period, seed=0))
+    assert r.rate >= 0.95
+    assert min(r.rate_by_class.values()) >= 0.85, r.rate_by_class
+    assert r.false_per_scan <= 0.2
+
+
+def test_paper_003_formations_seen_by_three_unsynchronized_radars():
+    from clients.scenarios.airspace import formation_scenario
+
+    r = held(formation_scenario(seed=0))
+    assert r.rate >= 0.9, r.rate_by_class
+    assert r.false_per_scan <= 0.1
+
+
+def test_a_4g_turn_at_450_m_s_is_held_at_a_2_s_revisit():
+    from clients.scenarios.airspace import manoeuvre_scenario
+
+    r = held(manoeuvre_scenario(speed=450.0, g_load=4.0, period=2.0, seed=1))
+    assert r.rate >= 0.9

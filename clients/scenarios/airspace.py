@@ -1,0 +1,351 @@
+"""Scripted scenarios with radars that measure range and bearing: targets of every speed.
+
+Shared by the tests and the benchmarks (``python -m benchmarks.speeds``).
+
+Truth
+-----
+Each :class:`ScriptedTarget` has a class name (``"parked"``, ``"airliner"``, ...), an initial
+state ``[x, y, vx, vy]`` at ``t = 0`` and manoeuvres: intervals during which it turns at a
+constant rate ω (rad/s), flying straight otherwise. Motion is the exact coordinated turn at ω
+(straight at ω = 0), intervals split at the manoeuvre boundaries, plus the nearly constant
+velocity noise of PSD ``q`` (m²/s³) of the target.
+
+Detections
+----------
+A :class:`PolarRadar` at ``position`` scans every ``period`` seconds from ``time_offset``.
+Each target is detected with probability ``pd``; its range ``ρ`` and bearing ``θ`` from the
+radar get Gaussian noise of standard deviations ``range_std`` (m) and ``bearing_std`` (rad),
+and the detection is reported in Cartesian coordinates with the linearized covariance
+
+    R = J diag(σ_ρ², σ_θ²) Jᵀ,   J = [[cos θ, −ρ sin θ], [sin θ, ρ cos θ]]
+
+at the measured range and bearing. False alarms: ``Poisson(clutter_mean)`` uniform over
+``clutter_area``, and ``Poisson(local_clutter_mean)`` uniform in a square of half-side
+``local_clutter_half_size`` around the centre of each group of targets in ``groups``
+(clutter near formations), each with the covariance of its position. The batch's clutter
+density is the larger of the two densities.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from clients.scenarios.multitarget import Area, SimulatedScan
+from clients.scenarios.multitarget import _move as move_targets
+
+__all__ = [
+    "FORMATION_GROUPS",
+    "Manoeuvre",
+    "PolarRadar",
+    "ScriptedScenario",
+    "ScriptedTarget",
+    "formation_scenario",
+    "manoeuvre_scenario",
+    "mixed_speed_scenario",
+    "simulate_scripted",
+]
+
+G = 9.80665  # m/s²
+
+
+@dataclass(frozen=True)
+class Manoeuvre:
+    """A turn at ``turn_rate`` (rad/s, counter-clockwise positive) from ``start`` for
+    ``duration`` seconds."""
+
+    start: float
+    duration: float
+    turn_rate: float
+
+
+@dataclass(frozen=True)
+class ScriptedTarget:
+    target_class: str
+    state: tuple[float, float, float, float]
+    manoeuvres: tuple[Manoeuvre, ...] = ()
+    q: float = 0.0
+
+
+@dataclass(frozen=True)
+class PolarRadar:
+    sensor_id: str
+    position: tuple[float, float] = (0.0, 0.0)
+    range_std: float = 50.0
+    bearing_std: float = 1e-3
+    pd: float = 0.9
+    period: float = 4.0
+    time_offset: float = 0.0
+    clutter_mean: float = 100.0
+    clutter_area: Area = ((-75e3, 75e3), (-75e3, 75e3))
+    local_clutter_mean: float = 0.0
+    local_clutter_half_size: float = 1500.0
+
+
+@dataclass(frozen=True)
+class ScriptedScenario:
+    targets: tuple[ScriptedTarget, ...]
+    radars: tuple[PolarRadar, ...]
+    duration: float
+    groups: tuple[tuple[int, ...], ...] = ()
+    seed: int = 0
+
+    @property
+    def classes(self) -> dict[int, str]:
+        """Target id → class name."""
+        return {i: t.target_class for i, t in enumerate(self.targets)}
+
+
+def _turn_rate(target: ScriptedTarget, t: float) -> float:
+    for m in target.manoeuvres:
+        if m.start <= t < m.start + m.duration:
+            return m.turn_rate
+    return 0.0
+
+
+def _move(state: np.ndarray, omega: float, T: float) -> np.ndarray:
+    """Exact coordinated turn of one ``[x, y, vx, vy]`` at ω over T (straight at ω = 0)."""
+    return move_targets(state[None, :], np.array([omega]), T)[0]
+
+
+def _propagate(
+    target: ScriptedTarget, state: np.ndarray, t0: float, t1: float, rng: np.random.Generator
+) -> np.ndarray:
+    cuts = sorted(
+        {t0, t1}
+        | {c for m in target.manoeuvres for c in (m.start, m.start + m.duration) if t0 < c < t1}
+    )
+    for a, b in itertools.pairwise(cuts):
+        state = _move(state, _turn_rate(target, a), b - a)
+    T = t1 - t0
+    if target.q > 0 and T > 0:
+        n = rng.standard_normal((2, 2))
+        s = math.sqrt(target.q)
+        state = state + np.concatenate(
+            [
+                s * math.sqrt(T**3 / 3.0) * n[0],
+                s * (math.sqrt(3.0 * T) / 2.0 * n[0] + math.sqrt(T) / 2.0 * n[1]),
+            ]
+        )
+    return state
+
+
+def _polar_covariance(rho: np.ndarray, theta: np.ndarray, radar: PolarRadar) -> np.ndarray:
+    c, s = np.cos(theta), np.sin(theta)
+    J = np.empty((rho.size, 2, 2))
+    J[:, 0, 0], J[:, 0, 1] = c, -rho * s
+    J[:, 1, 0], J[:, 1, 1] = s, rho * c
+    D = np.diag([radar.range_std**2, radar.bearing_std**2])
+    R = J @ D @ J.transpose(0, 2, 1)
+    return 0.5 * (R + R.transpose(0, 2, 1))
+
+
+def _polar(points: np.ndarray, radar: PolarRadar) -> tuple[np.ndarray, np.ndarray]:
+    d = points - np.asarray(radar.position)
+    return np.hypot(d[:, 0], d[:, 1]), np.arctan2(d[:, 1], d[:, 0])
+
+
+def _cartesian(rho: np.ndarray, theta: np.ndarray, radar: PolarRadar) -> np.ndarray:
+    return np.asarray(radar.position) + np.column_stack([rho * np.cos(theta), rho * np.sin(theta)])
+
+
+def simulate_scripted(scenario: ScriptedScenario) -> list[SimulatedScan]:
+    """Every radar's scans in time order (ties in radar order), reproducible by seed."""
+    rng = np.random.default_rng(scenario.seed)
+    slots = sorted(
+        (r.time_offset + k * r.period, i)
+        for i, r in enumerate(scenario.radars)
+        for k in range(math.floor((scenario.duration - r.time_offset) / r.period) + 1)
+        if r.time_offset + k * r.period <= scenario.duration
+    )
+    states = np.array([t.state for t in scenario.targets], dtype=float).reshape(-1, 4)
+    ids = np.arange(states.shape[0], dtype=np.int64)
+    now = 0.0
+    scans: list[SimulatedScan] = []
+    for index, (t, ri) in enumerate(slots):
+        if t > now:
+            states = np.array(
+                [
+                    _propagate(target, s, now, t, rng)
+                    for target, s in zip(scenario.targets, states, strict=True)
+                ]
+            ).reshape(-1, 4)
+            now = t
+        radar = scenario.radars[ri]
+        detected = rng.random(ids.size) < radar.pd
+        rho, theta = _polar(states[detected, :2], radar)
+        rho = rho + radar.range_std * rng.standard_normal(rho.size)
+        theta = theta + radar.bearing_std * rng.standard_normal(theta.size)
+        z_hit = _cartesian(rho, theta, radar)
+        (x0, x1), (y0, y1) = radar.clutter_area
+        n_uniform = int(rng.poisson(radar.clutter_mean))
+        clutter = [rng.uniform((x0, y0), (x1, y1), size=(n_uniform, 2))]
+        h = radar.local_clutter_half_size
+        for group in scenario.groups:
+            centre = states[list(group), :2].mean(axis=0)
+            n_local = int(rng.poisson(radar.local_clutter_mean))
+            clutter.append(centre + rng.uniform(-h, h, size=(n_local, 2)))
+        z_clutter = np.vstack(clutter)
+        c_rho, c_theta = _polar(z_clutter, radar)
+        z = np.vstack([z_hit, z_clutter])
+        R = _polar_covariance(np.concatenate([rho, c_rho]), np.concatenate([theta, c_theta]), radar)
+        owner = np.concatenate([ids[detected], np.full(z_clutter.shape[0], -1, dtype=np.int64)])
+        perm = rng.permutation(z.shape[0])
+        z, R, owner = z[perm], R[perm], owner[perm]
+        density = radar.clutter_mean / ((x1 - x0) * (y1 - y0))
+        if scenario.groups and radar.local_clutter_mean > 0:
+            density = max(density, radar.local_clutter_mean / (2.0 * h) ** 2)
+        for a in (z, R, owner):
+            a.setflags(write=False)
+        truth = states.copy()
+        truth.setflags(write=False)
+        scans.append(
+            SimulatedScan(
+                time=float(t),
+                sensor_id=radar.sensor_id,
+                truth_ids=ids,
+                truth_states=truth,
+                z=z,
+                R=R,
+                target_of_detection=owner,
+                detection_ids=tuple(f"s{index}-d{j}" for j in range(z.shape[0])),
+                pd=float(radar.pd),
+                clutter_density=float(density),
+                sensor_position=radar.position,
+            )
+        )
+    return scans
+
+
+def _heading_state(
+    mid: tuple[float, float], speed: float, heading: float, t_mid: float
+) -> tuple[float, float, float, float]:
+    """The initial state of a straight flight at ``speed`` along ``heading`` that passes
+    ``mid`` at ``t_mid``."""
+    vx, vy = speed * math.cos(heading), speed * math.sin(heading)
+    return (mid[0] - vx * t_mid, mid[1] - vy * t_mid, vx, vy)
+
+
+SPEED_CLASSES = ("parked", "ground", "helicopter", "airliner", "jet")
+
+
+def mixed_speed_scenario(period: float = 4.0, duration: float = 160.0, seed: int = 0):
+    """Scenario 1 of the issue on targets of every speed: one radar at the origin (range noise
+    50 m, bearing 1 mrad, Pd 0.9, about 100 false alarms a scan over 150 km × 150 km) scanning
+    every ``period`` seconds, watching 4 parked vehicles, 8 ground vehicles (3-35 m/s),
+    4 helicopters (30-90 m/s), 8 airliners (180-280 m/s; four turn at 2-4°/s for 20-40 s) and
+    two jets at 500 and 680 m/s, the faster pulling 5 g for 15 s. Targets are 5-60 km from
+    the radar while the scenario runs."""
+    rng = np.random.default_rng(1000 + seed)
+    t_mid = duration / 2.0
+    targets: list[ScriptedTarget] = []
+
+    def place(lo: float, hi: float) -> tuple[float, float]:
+        r, a = rng.uniform(lo, hi), rng.uniform(-math.pi, math.pi)
+        return r * math.cos(a), r * math.sin(a)
+
+    for _ in range(4):
+        x, y = place(5e3, 50e3)
+        targets.append(ScriptedTarget("parked", (x, y, 0.0, 0.0)))
+    for _ in range(8):
+        targets.append(
+            ScriptedTarget(
+                "ground",
+                _heading_state(
+                    place(8e3, 50e3), rng.uniform(3, 35), rng.uniform(-math.pi, math.pi), t_mid
+                ),
+                q=0.05,
+            )
+        )
+    for _ in range(4):
+        targets.append(
+            ScriptedTarget(
+                "helicopter",
+                _heading_state(
+                    place(10e3, 45e3), rng.uniform(30, 90), rng.uniform(-math.pi, math.pi), t_mid
+                ),
+                q=0.1,
+            )
+        )
+    for i in range(8):
+        speed = rng.uniform(180, 280)
+        manoeuvres = ()
+        if i % 2 == 0:
+            rate = math.radians(rng.uniform(2, 4)) * rng.choice([-1.0, 1.0])
+            manoeuvres = (
+                Manoeuvre(rng.uniform(0.2, 0.6) * duration, rng.uniform(20, 40), float(rate)),
+            )
+        # Airliners cross the area on chords 12-30 km from the radar.
+        heading = rng.uniform(-math.pi, math.pi)
+        offset = rng.uniform(12e3, 30e3)
+        mid = (-offset * math.sin(heading), offset * math.cos(heading))
+        targets.append(
+            ScriptedTarget("airliner", _heading_state(mid, speed, heading, t_mid), manoeuvres, 0.05)
+        )
+    for speed, offset, heading, turn in ((500.0, 25e3, 0.3, None), (680.0, 35e3, 2.0, 5.0)):
+        mid = (-offset * math.sin(heading), offset * math.cos(heading))
+        manoeuvres = ()
+        if turn is not None:
+            manoeuvres = (Manoeuvre(0.45 * duration, 15.0, turn * G / speed),)
+        targets.append(
+            ScriptedTarget("jet", _heading_state(mid, speed, heading, t_mid), manoeuvres, 0.1)
+        )
+    radar = PolarRadar("radar-1", period=period)
+    return ScriptedScenario(tuple(targets), (radar,), duration, seed=seed)
+
+
+#: The two formations of paper 003 (section IV, environment 1): target indices.
+FORMATION_GROUPS = ((0, 1, 2, 3), (4, 5, 6, 7))
+
+
+def formation_scenario(
+    period: float = 1.0, duration: float = 60.0, local_clutter_mean: float = 6.0, seed: int = 0
+) -> ScriptedScenario:
+    """Scenario 2: paper 003's two formations of four (from (5000, 800) m at (−200, 300) m/s,
+    and from (−5000, 8000) m at (100, 300) m/s, members 200-350 m apart), watched by three
+    radars at (−20, 0), (0, −20) and (20, 0) km with range noise 40 m and bearing noise
+    2 mrad, Pd 0.9, scanning every ``period`` seconds, each a third of a period after the
+    previous one; ``local_clutter_mean`` false alarms per scan within 1.5 km of each formation
+    and 10 more over 60 km × 60 km."""
+    first = ((5000.0, 800.0), (5200.0, 1000.0), (5550.0, 1200.0), (5700.0, 1400.0))
+    second = ((-5000.0, 8000.0), (-5200.0, 8200.0), (-5550.0, 8400.0), (-5700.0, 8600.0))
+    targets = tuple(
+        ScriptedTarget(f"formation-{k + 1}", (x, y, vx, vy), q=0.1)
+        for k, (points, (vx, vy)) in enumerate(((first, (-200.0, 300.0)), (second, (100.0, 300.0))))
+        for x, y in points
+    )
+    radars = tuple(
+        PolarRadar(
+            f"radar-{i + 1}",
+            position=pos,
+            range_std=40.0,
+            bearing_std=2e-3,
+            pd=0.9,
+            period=period,
+            time_offset=i * period / 3.0,
+            clutter_mean=10.0,
+            clutter_area=((-30e3, 30e3), (-10e3, 50e3)),
+            local_clutter_mean=local_clutter_mean,
+        )
+        for i, pos in enumerate(((-20e3, 0.0), (0.0, -20e3), (20e3, 0.0)))
+    )
+    return ScriptedScenario(targets, radars, duration, groups=FORMATION_GROUPS, seed=seed)
+
+
+def manoeuvre_scenario(
+    speed: float = 450.0, g_load: float = 4.0, period: float = 2.0, seed: int = 0
+) -> ScriptedScenario:
+    """One target at ``speed`` pulling ``g_load`` g through a 90° turn after 40 s straight,
+    then straight again, 30 km from a radar of range noise 50 m and bearing noise 1 mrad
+    scanning every ``period`` seconds, 100 false alarms a scan over 150 km × 150 km."""
+    omega = g_load * G / speed
+    turn = (math.pi / 2) / omega
+    duration = 40.0 + turn + 40.0
+    target = ScriptedTarget(
+        "manoeuvring", (-speed * 40.0, 30e3, speed, 0.0), (Manoeuvre(40.0, turn, omega),), 0.1
+    )
+    radar = PolarRadar("radar-1", period=period)
+    return ScriptedScenario((target,), (radar,), duration, seed=seed)

@@ -1,0 +1,61 @@
+import math
+
+import numpy as np
+import pytest
+
+from clients.scenarios.airspace import (
+    Manoeuvre,
+    PolarRadar,
+    ScriptedScenario,
+    ScriptedTarget,
+    formation_scenario,
+    mixed_speed_scenario,
+    simulate_scripted,
+)
+
+
+def test_polar_noise_and_its_covariance_agree():
+    """Range noise along the line of sight, bearing noise across it, and the reported R
+    matches the spread of the detections."""
+    radar = PolarRadar(
+        "r", (0.0, 0.0), range_std=50.0, bearing_std=2e-3, pd=1.0, period=1.0, clutter_mean=0.0
+    )
+    target = ScriptedTarget("parked", (0.0, 30e3, 0.0, 0.0))
+    scans = simulate_scripted(ScriptedScenario((target,), (radar,), duration=1999.0, seed=1))
+    z = np.array([s.z[0] for s in scans])
+    R = scans[0].R[0]
+    assert np.std(z[:, 1]) == pytest.approx(50.0, rel=0.1)  # range: y here
+    assert np.std(z[:, 0]) == pytest.approx(60.0, rel=0.1)  # 30 km x 2 mrad
+    np.testing.assert_allclose(np.diag(R), [60.0**2, 50.0**2], rtol=0.02)
+
+
+def test_scripted_turn_changes_heading_by_rate_times_duration():
+    omega = math.radians(3.0)
+    target = ScriptedTarget("airliner", (0.0, 0.0, 250.0, 0.0), (Manoeuvre(10.0, 30.0, omega),))
+    radar = PolarRadar("r", (0.0, -50e3), pd=1.0, period=5.0, clutter_mean=0.0)
+    scans = simulate_scripted(ScriptedScenario((target,), (radar,), duration=60.0))
+    vx, vy = scans[-1].truth_states[0, 2:]
+    assert math.atan2(vy, vx) == pytest.approx(omega * 30.0, abs=1e-9)
+    assert math.hypot(vx, vy) == pytest.approx(250.0)
+
+
+def test_mixed_speed_scenario_has_every_class_and_speed():
+    sc = mixed_speed_scenario(period=4.0, seed=0)
+    scans = simulate_scripted(sc)
+    speeds = np.hypot(*scans[0].truth_states[:, 2:].T)
+    classes = np.array([sc.classes[i] for i in range(len(sc.targets))])
+    assert set(classes) == {"parked", "ground", "helicopter", "airliner", "jet"}
+    assert np.all(speeds[classes == "parked"] == 0)
+    assert speeds.max() == pytest.approx(680.0)
+    ranges = np.hypot(*scans[0].truth_states[:, :2].T)
+    assert ranges.min() > 4e3 and ranges.max() < 80e3
+    assert 60 < np.mean([np.sum(s.target_of_detection < 0) for s in scans]) < 140
+
+
+def test_formation_scenario_three_radars_unsynchronized():
+    scans = simulate_scripted(formation_scenario(seed=0))
+    first = [(s.sensor_id, s.time) for s in scans[:4]]
+    assert [sid for sid, _ in first] == ["radar-1", "radar-2", "radar-3", "radar-1"]
+    assert 0 < first[1][1] - first[0][1] < 1.0
+    speeds = np.hypot(*scans[0].truth_states[:, 2:].T)
+    np.testing.assert_allclose(sorted(set(np.round(speeds))), [316.0, 361.0])

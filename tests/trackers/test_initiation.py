@@ -1,0 +1,180 @@
+"""Velocity-gated two-point initiation: worked answers, hand-made scenes, bounded cost."""
+
+import math
+
+import numpy as np
+import pytest
+
+from trackers.config import TrackerConfig
+from trackers.individual import IndividualTracker
+from trackers.initiation import Candidates, cv_predict, pair_candidates, two_point_estimate
+
+
+def scan_at(t, points, sigma=30.0, lam=1e-8, pd=0.9):
+    from trackers.types import Scan
+
+    z = np.asarray(points, dtype=float).reshape(-1, 2)
+    return Scan(
+        "r1", float(t), z, np.tile(sigma**2 * np.eye(2), (len(z), 1, 1)), pd=pd, clutter_density=lam
+    )
+
+
+def test_fast_component_is_the_two_point_difference():
+    """With v_max Δt far beyond the noise and a negligible slow weight the state is the
+    classical two-point estimate: p = z_j, v = (z_j − z_c)/Δt, cov(v) = (R_c + R_j)/Δt²."""
+    Rc, Rj = np.diag([400.0, 100.0]), np.diag([900.0, 225.0])
+    zc, zj, dt = np.array([0.0, 0.0]), np.array([1200.0, -400.0]), 4.0
+    x, P, _ = two_point_estimate(
+        zc, Rc, zj, Rj, dt, max_speed=5000.0, velocity_std=1.0, slow_fraction=1e-12, q=0.0
+    )
+    np.testing.assert_allclose(x[0, :2], zj, atol=0.05)
+    np.testing.assert_allclose(x[0, 2:], (zj - zc) / dt, rtol=1e-3)
+    np.testing.assert_allclose(P[0, :2, :2], Rj, rtol=1e-3)
+    np.testing.assert_allclose(P[0, 2:, 2:], (Rc + Rj) / dt**2, rtol=2e-3)
+    np.testing.assert_allclose(P[0, :2, 2:], Rj / dt, rtol=1e-3)
+
+
+def test_slow_component_is_the_kalman_filter_of_a_gaussian_velocity_prior():
+    """With all weight on the slow component the result is the Kalman update of the prior
+    [z_c, 0], diag(R_c, σ² I), predicted by F over Δt, with z_j."""
+    Rc, Rj, s, dt = 25.0 * np.eye(2), 36.0 * np.eye(2), 10.0, 1.5
+    zc, zj = np.array([10.0, 20.0]), np.array([25.0, 5.0])
+    x, P, loglik = two_point_estimate(
+        zc, Rc, zj, Rj, dt, max_speed=700.0, velocity_std=s, slow_fraction=1 - 1e-15, q=0.0
+    )
+    F = np.block([[np.eye(2), dt * np.eye(2)], [np.zeros((2, 2)), np.eye(2)]])
+    P0 = F @ np.diag([25.0, 25.0, s**2, s**2]) @ F.T
+    H = np.hstack([np.eye(2), np.zeros((2, 2))])
+    S = H @ P0 @ H.T + Rj
+    K = P0 @ H.T @ np.linalg.inv(S)
+    x_ref = np.r_[zc, 0.0, 0.0] + K @ (zj - zc)
+    np.testing.assert_allclose(x[0], x_ref, atol=1e-9)
+    np.testing.assert_allclose(P[0], P0 - K @ S @ K.T, atol=1e-9)
+    nu = zj - zc
+    ref = (
+        -0.5 * nu @ np.linalg.solve(S, nu)
+        - math.log(2 * math.pi)
+        - 0.5 * math.log(np.linalg.det(S))
+    )
+    assert loglik[0] == pytest.approx(ref, abs=1e-9)
+
+
+def test_cv_predict_matches_the_transition_matrix():
+    rng = np.random.default_rng(0)
+    A = rng.normal(size=(3, 4, 4))
+    P = A @ A.transpose(0, 2, 1)
+    x = rng.normal(size=(3, 4))
+    dt = np.array([0.5, 1.0, 4.0])
+    xp, Pp = cv_predict(x, P, dt, q=2.0)
+    for k, T in enumerate(dt):
+        F = np.block([[np.eye(2), T * np.eye(2)], [np.zeros((2, 2)), np.eye(2)]])
+        Q1 = 2.0 * np.array([[T**3 / 3, T**2 / 2], [T**2 / 2, T]])
+        Q = np.kron(Q1, np.eye(2))
+        np.testing.assert_allclose(xp[k], F @ x[k])
+        np.testing.assert_allclose(Pp[k], F @ P[k] @ F.T + Q, atol=1e-12)
+
+
+@pytest.mark.parametrize(
+    ("speed", "period"), [(680.0, 2.0), (250.0, 4.0), (600.0, 0.5), (0.0, 10.0)]
+)
+def test_a_target_of_any_speed_starts_with_the_defaults(speed, period):
+    """Three detections make a tentative track, a few more confirm it, at any speed up to
+    the configured maximum and any revisit from 0.5 to 10 s."""
+    tr = IndividualTracker(TrackerConfig())
+    rng = np.random.default_rng(1)
+    heading = np.array([math.cos(0.7), math.sin(0.7)])
+    first_track, first_confirmed = None, None
+    for k in range(8):
+        truth = np.array([3000.0, -2000.0]) + speed * k * period * heading
+        res = tr.step(scan_at(k * period, truth + rng.normal(0, 30.0, 2)))
+        if res.tracks and first_track is None:
+            first_track = k
+        if res.confirmed() and first_confirmed is None:
+            first_confirmed = k
+            (t,) = res.confirmed()
+            np.testing.assert_allclose(t.velocity, speed * heading, atol=max(25.0, 0.1 * speed))
+    assert first_track == 2
+    assert first_confirmed is not None and first_confirmed <= 4
+
+
+def test_a_lone_false_alarm_starts_nothing():
+    tr = IndividualTracker(TrackerConfig())
+    res = tr.step(scan_at(0.0, [[5000.0, 5000.0]]))
+    assert res.tracks == ()
+    for k in range(1, 6):
+        res = tr.step(scan_at(2.0 * k, np.zeros((0, 2))))
+        assert res.tracks == ()
+    assert len(tr._candidates) == 0  # dropped by its score or its age
+
+
+def test_single_point_method_cannot_start_a_fast_target():
+    """The old start, kept as a method: a 250 m/s target at T = 4 s is never initiated."""
+    cfg = TrackerConfig().merged({"initiation": {"method": "single_point"}})
+    tr = IndividualTracker(cfg)
+    for k in range(8):
+        res = tr.step(scan_at(4.0 * k, [[1000.0 * k, 0.0]]))
+    assert res.confirmed() == ()
+
+
+def test_candidate_pairs_stay_bounded_in_dense_clutter():
+    """2,000 false alarms a scan within reach of every candidate: each candidate makes at most
+    max_pairs_per_candidate pairs, found through the k-d tree."""
+    rng = np.random.default_rng(2)
+    n = 2000
+    cand = Candidates(
+        z=rng.uniform(-1000, 1000, (n, 2)),
+        R=np.tile(100.0 * np.eye(2), (n, 1, 1)),
+        time=np.zeros(n),
+        score=np.zeros(n),
+        detection_ids=np.empty(n, dtype=object),
+        origin=np.arange(n),
+    )
+    z = rng.uniform(-1000, 1000, (n, 2))
+    R = np.tile(100.0 * np.eye(2), (n, 1, 1))
+    pairs = pair_candidates(
+        cand,
+        z,
+        R,
+        np.ones(n, dtype=bool),
+        1.0,
+        max_speed=700.0,
+        velocity_std=15.0,
+        slow_fraction=0.8,
+        q=0.5,
+        gamma=18.4,
+        max_pairs=8,
+        pd=0.9,
+        clutter_density=1e-4,
+    )
+    per_candidate = np.bincount(pairs.candidate, minlength=n)
+    assert per_candidate.max() <= 8
+    assert pairs.size <= 8 * n
+
+
+def test_tracker_keeps_new_tracks_bounded_in_dense_clutter():
+    """Scan after scan of dense clutter: the tracker's candidates, pairs and tracks stay below
+    fixed multiples of the detections a scan."""
+    tr = IndividualTracker(TrackerConfig())
+    rng = np.random.default_rng(3)
+    n = 500
+    for k in range(10):
+        res = tr.step(scan_at(k, rng.uniform(-5000, 5000, (n, 2)), sigma=10.0, lam=n / 1e8))
+        assert len(tr._candidates) <= 3 * n
+        assert len(tr._pairs) <= 8 * 3 * n
+        assert len(res.tracks) <= 3 * n
+    assert res.confirmed() == ()
+
+
+def test_two_targets_a_formation_apart_get_two_tracks():
+    """Two parallel fast targets 250 m apart: rival pairs (each candidate with each second
+    detection) are resolved by the third scan, one track each with the right velocity."""
+    tr = IndividualTracker(TrackerConfig())
+    v = np.array([-200.0, 300.0])
+    rng = np.random.default_rng(4)
+    for k in range(7):
+        pts = np.array([[5000.0, 800.0], [5200.0, 960.0]]) + v * k
+        res = tr.step(scan_at(float(k), pts + rng.normal(0, 20.0, (2, 2)), sigma=20.0))
+    conf = res.confirmed()
+    assert len(conf) == 2
+    for t in conf:
+        np.testing.assert_allclose(t.velocity, v, atol=25.0)
