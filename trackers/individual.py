@@ -39,6 +39,7 @@ from trackers.initiation import (
 )
 from trackers.models.measurement import H_POSITION
 from trackers.models.motion import STATE_DIM, build_models
+from trackers.rows import RowArrays, sort_within_groups
 from trackers.scoring import hit_increment, initial_score, miss_increment, sequential_test
 from trackers.types import Scan, StepResult, TrackSnapshot
 
@@ -51,7 +52,7 @@ KIND = "individual"
 
 
 @dataclass(frozen=True, eq=False)
-class TrackArrays:
+class TrackArrays(RowArrays):
     """Every individual track, one row each.
 
     x (N, M, 5), P (N, M, 5, 5), mu (N, M): the IMM mode-conditioned estimates and mode
@@ -96,24 +97,9 @@ class TrackArrays:
             origin=np.zeros(0, dtype=np.int64),
         )
 
-    def __len__(self) -> int:
-        return int(self.score.size)
-
     @property
     def n_modes(self) -> int:
         return int(self.mu.shape[1])
-
-    def take(self, index: np.ndarray) -> TrackArrays:
-        """The rows at ``index`` (integer indices or a boolean mask)."""
-        return TrackArrays(**{k: getattr(self, k)[index] for k in _FIELDS})
-
-    def concat(self, other: TrackArrays) -> TrackArrays:
-        return TrackArrays(
-            **{k: np.concatenate([getattr(self, k), getattr(other, k)]) for k in _FIELDS}
-        )
-
-
-_FIELDS = tuple(TrackArrays.__dataclass_fields__)
 
 
 def _objects(items: Sequence[object]) -> np.ndarray:
@@ -311,19 +297,17 @@ class IndividualTracker:
         gamma = config.gating.threshold
         q = config.motion.q_cv
 
-        pairs = self._pairs
-        pairs = pairs.take(t - pairs.time <= init.candidate_max_age)
+        tested = self._pairs.take(t - self._pairs.time <= init.candidate_max_age)
         third = third_detections(
-            pairs, scan.z, scan.R, free, t, q=q, gamma=gamma, pd=pd, clutter_density=lam_fa
+            tested, scan.z, scan.R, free, t, q=q, gamma=gamma, pd=pd, clutter_density=lam_fa
         )
         free_left = free.copy()
         free_left[third.detection] = False
         # A pair not extended goes on as its missed branch; rivals of an extended pair (the
         # same first detection) are dropped.
-        offered = t - pairs.time >= MIN_PAIR_INTERVAL
-        score = np.where(offered, pairs.score + miss, pairs.score)
-        keep = (score > tm.delete_threshold) & ~np.isin(pairs.origin, pairs.origin[third.pair])
-        pairs = replace(pairs, score=score).take(keep)
+        score = _missed_branch(tested.time, tested.score, t, miss)
+        keep = (score > tm.delete_threshold) & ~np.isin(tested.origin, tested.origin[third.pair])
+        pairs = replace(tested, score=score).take(keep)
 
         cand = self._candidates
         cand = cand.take(t - cand.time <= init.candidate_max_age)
@@ -352,8 +336,7 @@ class IndividualTracker:
             created=cand.time[two.candidate],
             detection_ids=_objects([scan.detection_ids[j] for j in two.detection.tolist()]),
         )
-        offered = t - cand.time >= MIN_PAIR_INTERVAL
-        score = np.where(offered, cand.score + miss, cand.score)
+        score = _missed_branch(cand.time, cand.score, t, miss)
         cand = replace(cand, score=score).take(score > tm.delete_threshold)
 
         idx = np.flatnonzero(free_left)
@@ -370,40 +353,67 @@ class IndividualTracker:
         candidates = cand.concat(fresh)
         pairs = pairs.concat(new_pairs)
 
+        born = self._new_tracks(
+            config,
+            scan,
+            third.detection,
+            third.x,
+            third.P,
+            score=third.score,
+            hits=3,
+            created=tested.created[third.pair],
+            origin=tested.origin[third.pair],
+        )
+        return born, candidates, pairs
+
+    def _new_tracks(
+        self,
+        config: TrackerConfig,
+        scan: Scan,
+        detections: np.ndarray,
+        x: np.ndarray,
+        P: np.ndarray,
+        *,
+        score: np.ndarray,
+        hits: int,
+        created: np.ndarray,
+        origin: np.ndarray,
+    ) -> TrackArrays:
+        """Tentative tracks at this scan from states ``x (n, 4)`` over ``[x, y, vx, vy]``
+        with covariances ``P (n, 4, 4)``, each mode starting from that state with turn rate 0
+        of std ``turn_rate_std``; ``detections`` index the scan's detections they hold."""
         M = len(config.motion.models)
-        n = third.size
+        n = detections.size
         if n == 0:
-            return TrackArrays.empty(M), candidates, pairs
+            return TrackArrays.empty(M)
         x0 = np.zeros((n, STATE_DIM))
-        x0[:, :4] = third.x
+        x0[:, :4] = x
         P0 = np.zeros((n, STATE_DIM, STATE_DIM))
-        P0[:, :4, :4] = third.P
-        P0[:, 4, 4] = init.turn_rate_std**2
+        P0[:, :4, :4] = P
+        P0[:, 4, 4] = config.initiation.turn_rate_std**2
         ids = _objects([f"T{next(self._next_id)}" for _ in range(n)])
         det_ids = _objects(
             [
                 () if scan.detection_ids[j] is None else (scan.detection_ids[j],)
-                for j in third.detection.tolist()
+                for j in detections.tolist()
             ]
         )
-        source = self._pairs.take(t - self._pairs.time <= init.candidate_max_age)
-        born = TrackArrays(
+        return TrackArrays(
             ids=ids,
             x=np.repeat(x0[:, None, :], M, axis=1),
             P=np.repeat(P0[:, None, :, :], M, axis=1),
             mu=np.tile(np.asarray(config.motion.initial_mode_probabilities), (n, 1)),
             x_comb=x0,
             P_comb=P0,
-            score=third.score,
-            peak=third.score.copy(),
+            score=np.asarray(score, dtype=float),
+            peak=np.array(score, dtype=float),
             confirmed=np.zeros(n, dtype=bool),
-            hits=np.full(n, 3, dtype=np.int64),
-            created=source.created[third.pair],
-            updated=np.full(n, t),
+            hits=np.full(n, hits, dtype=np.int64),
+            created=np.asarray(created, dtype=float),
+            updated=np.full(n, float(scan.time)),
             detection_ids=det_ids,
-            origin=source.origin[third.pair],
+            origin=np.asarray(origin, dtype=np.int64),
         )
-        return born, candidates, pairs
 
     def _initiate(
         self, scan: Scan, free: np.ndarray, config: TrackerConfig, lam_fa: float
@@ -412,41 +422,23 @@ class IndividualTracker:
         velocity and turn rate with the configured standard deviations."""
         idx = np.flatnonzero(free)
         n = idx.size
-        M = len(config.motion.models)
-        if n == 0:
-            return TrackArrays.empty(M)
-        init = config.initiation
-        x0 = np.zeros((n, STATE_DIM))
-        x0[:, :2] = scan.z[idx]
-        P0 = np.zeros((n, STATE_DIM, STATE_DIM))
-        P0[:, :2, :2] = scan.R[idx]
-        P0[:, 2, 2] = P0[:, 3, 3] = init.velocity_std**2
-        P0[:, 4, 4] = init.turn_rate_std**2
+        x = np.zeros((n, 4))
+        x[:, :2] = scan.z[idx]
+        P = np.zeros((n, 4, 4))
+        P[:, :2, :2] = scan.R[idx]
+        P[:, 2, 2] = P[:, 3, 3] = config.initiation.velocity_std**2
         L1 = initial_score(config.track_management.new_target_density, lam_fa)
-        ids = _objects([f"T{next(self._next_id)}" for _ in range(n)])
         origin = np.arange(self._next_origin, self._next_origin + n, dtype=np.int64)
         self._next_origin += n
-        det_ids = _objects(
-            [
-                () if scan.detection_ids[j] is None else (scan.detection_ids[j],)
-                for j in idx.tolist()
-            ]
-        )
-        t = float(scan.time)
-        return TrackArrays(
-            ids=ids,
-            x=np.repeat(x0[:, None, :], M, axis=1),
-            P=np.repeat(P0[:, None, :, :], M, axis=1),
-            mu=np.tile(np.asarray(config.motion.initial_mode_probabilities), (n, 1)),
-            x_comb=x0,
-            P_comb=P0,
+        return self._new_tracks(
+            config,
+            scan,
+            idx,
+            x,
+            P,
             score=np.full(n, L1),
-            peak=np.full(n, L1),
-            confirmed=np.zeros(n, dtype=bool),
-            hits=np.ones(n, dtype=np.int64),
-            created=np.full(n, t),
-            updated=np.full(n, t),
-            detection_ids=det_ids,
+            hits=1,
+            created=np.full(n, float(scan.time)),
             origin=origin,
         )
 
@@ -464,21 +456,21 @@ class IndividualTracker:
         return _snapshots(self._tracks, names, t, confirmed_only=confirmed_only)
 
 
+def _missed_branch(time: np.ndarray, score: np.ndarray, t: float, miss: float) -> np.ndarray:
+    """Scores of candidates or pairs that go on without a detection at ``t``: ``L + ln(1 − P_D)``
+    where the scan is at least ``MIN_PAIR_INTERVAL`` after them, else unchanged (a scan at
+    the same instant says nothing of them)."""
+    return np.where(t - time >= MIN_PAIR_INTERVAL, score + miss, score)
+
+
 def _best_of_each_origin(tracks: TrackArrays) -> np.ndarray:
     """Mask of the tracks to keep: every confirmed track, and of the tentative tracks that
     share an origin (rival starts from one detection) only the one with the highest score,
     unless a confirmed track of that origin exists."""
-    if not len(tracks):
-        return np.ones(0, dtype=bool)
-    # Sort by origin, then confirmed first, then by falling score: the first of each origin
-    # is its best hypothesis.
-    order = np.lexsort((-tracks.score, ~tracks.confirmed, tracks.origin))
-    o = tracks.origin[order]
-    first = np.ones(o.size, dtype=bool)
-    first[1:] = o[1:] != o[:-1]
-    keep = np.zeros(len(tracks), dtype=bool)
-    keep[order] = first
-    return keep | tracks.confirmed
+    order, rank = sort_within_groups(tracks.origin, tracks.score, first=tracks.confirmed)
+    best = np.zeros(len(tracks), dtype=bool)
+    best[order] = rank == 0
+    return best | tracks.confirmed
 
 
 def _snapshots(

@@ -51,6 +51,7 @@ from scipy.spatial import cKDTree
 
 from trackers.association.gating import gate, inverse_2x2, log_gaussian_2d, max_eigenvalue_2x2
 from trackers.association.gnn import gnn_assign
+from trackers.rows import RowArrays, sort_within_groups
 
 __all__ = [
     "Candidates",
@@ -76,7 +77,7 @@ PAIR_PRUNE_LOG_RATIO = math.log(100.0)
 
 
 @dataclass(frozen=True, eq=False)
-class Candidates:
+class Candidates(RowArrays):
     """Detections waiting for a second one: ``z (n, 2)``, ``R (n, 2, 2)``, ``time (n,)``,
     ``score (n,)`` (the LLR of a track holding this one detection, misses included),
     ``detection_ids (n,)`` (objects) and ``origin (n,)``, a number unique to each candidate
@@ -100,32 +101,9 @@ class Candidates:
             origin=np.zeros(0, dtype=np.int64),
         )
 
-    def __len__(self) -> int:
-        return int(self.time.size)
-
-    def take(self, index: np.ndarray) -> Candidates:
-        return Candidates(
-            z=self.z[index],
-            R=self.R[index],
-            time=self.time[index],
-            score=self.score[index],
-            detection_ids=self.detection_ids[index],
-            origin=self.origin[index],
-        )
-
-    def concat(self, other: Candidates) -> Candidates:
-        return Candidates(
-            z=np.concatenate([self.z, other.z]),
-            R=np.concatenate([self.R, other.R]),
-            time=np.concatenate([self.time, other.time]),
-            score=np.concatenate([self.score, other.score]),
-            detection_ids=np.concatenate([self.detection_ids, other.detection_ids]),
-            origin=np.concatenate([self.origin, other.origin]),
-        )
-
 
 @dataclass(frozen=True, eq=False)
-class Pairs:
+class Pairs(RowArrays):
     """Two-detection hypotheses waiting for a third: the state ``x (k, 4)`` =
     ``[x, y, vx, vy]`` with covariance ``P (k, 4, 4)`` at ``time (k,)``, the score
     ``score (k,)``, the candidate's ``origin (k,)`` and time ``created (k,)``, and the
@@ -150,20 +128,6 @@ class Pairs:
             created=np.zeros(0),
             detection_ids=np.zeros(0, dtype=object),
         )
-
-    def __len__(self) -> int:
-        return int(self.time.size)
-
-    def take(self, index: np.ndarray) -> Pairs:
-        return Pairs(**{k: getattr(self, k)[index] for k in _PAIR_FIELDS})
-
-    def concat(self, other: Pairs) -> Pairs:
-        return Pairs(
-            **{k: np.concatenate([getattr(self, k), getattr(other, k)]) for k in _PAIR_FIELDS}
-        )
-
-
-_PAIR_FIELDS = tuple(Pairs.__dataclass_fields__)
 
 
 @dataclass(frozen=True, eq=False)
@@ -468,18 +432,18 @@ def pair_candidates(
     fj = np.fromiter(itertools.chain.from_iterable(hits), dtype=np.intp, count=int(counts.sum()))
     dt = dt_all[ci]
     d = zf[fj] - candidates.z[ci]
+    R_sum = candidates.R[ci] + Rf[fj]
     dist = np.sqrt(np.einsum("ki,ki->k", d, d))
     reach = max_speed * dt
     e = d * (1.0 - np.minimum(1.0, reach / np.maximum(dist, 1e-300)))[:, None]
-    S_inv, _ = inverse_2x2(candidates.R[ci] + Rf[fj])
+    S_inv, _ = inverse_2x2(R_sum)
     keep = np.einsum("ki,kij,kj->k", e, S_inv, e) <= gamma
-    ci, fj, dt = ci[keep], fj[keep], dt[keep]
-    if ci.size == 0:
+    if not keep.any():
         return none
-    d = zf[fj] - candidates.z[ci]
+    ci, fj, dt, d, R_sum = ci[keep], fj[keep], dt[keep], d[keep], R_sum[keep]
     a_s, a_f = _component_logliks(
         d,
-        candidates.R[ci] + Rf[fj],
+        R_sum,
         dt,
         max_speed=max_speed,
         velocity_std=velocity_std,
@@ -494,11 +458,9 @@ def pair_candidates(
         & (score >= _group_max(ci, score) - PAIR_PRUNE_LOG_RATIO)
         & (score >= _group_max(fj, score) - PAIR_PRUNE_LOG_RATIO)
     )
-    order = np.flatnonzero(good)
-    order = order[np.lexsort((-score[order], ci[order]))]
-    ci_sorted = ci[order]
-    first = np.searchsorted(ci_sorted, ci_sorted, side="left")
-    order = order[np.arange(order.size) - first < max_pairs]
+    good = np.flatnonzero(good)
+    by_candidate, rank = sort_within_groups(ci[good], score[good])
+    order = good[by_candidate[rank < max_pairs]]
     ci, fj, score = ci[order], fj[order], score[order]
     x, P, _ = _mixture_state(
         d[order],

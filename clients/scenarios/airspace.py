@@ -34,8 +34,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from clients.scenarios.multitarget import Area, SimulatedScan
-from clients.scenarios.multitarget import _move as move_targets
+from clients.scenarios.multitarget import Area, SimulatedScan, move_targets, ncv_noise
 
 __all__ = [
     "FORMATION_GROUPS",
@@ -106,11 +105,6 @@ def _turn_rate(target: ScriptedTarget, t: float) -> float:
     return 0.0
 
 
-def _move(state: np.ndarray, omega: float, T: float) -> np.ndarray:
-    """Exact coordinated turn of one ``[x, y, vx, vy]`` at ω over T (straight at ω = 0)."""
-    return move_targets(state[None, :], np.array([omega]), T)[0]
-
-
 def _propagate(
     target: ScriptedTarget, state: np.ndarray, t0: float, t1: float, rng: np.random.Generator
 ) -> np.ndarray:
@@ -119,17 +113,10 @@ def _propagate(
         | {c for m in target.manoeuvres for c in (m.start, m.start + m.duration) if t0 < c < t1}
     )
     for a, b in itertools.pairwise(cuts):
-        state = _move(state, _turn_rate(target, a), b - a)
+        state = move_targets(state[None, :], np.array([_turn_rate(target, a)]), b - a)[0]
     T = t1 - t0
     if target.q > 0 and T > 0:
-        n = rng.standard_normal((2, 2))
-        s = math.sqrt(target.q)
-        state = state + np.concatenate(
-            [
-                s * math.sqrt(T**3 / 3.0) * n[0],
-                s * (math.sqrt(3.0 * T) / 2.0 * n[0] + math.sqrt(T) / 2.0 * n[1]),
-            ]
-        )
+        state = state + ncv_noise(rng, target.q, T, 1)[0]
     return state
 
 
@@ -250,26 +237,15 @@ def mixed_speed_scenario(period: float = 4.0, duration: float = 160.0, seed: int
     for _ in range(4):
         x, y = place(5e3, 50e3)
         targets.append(ScriptedTarget("parked", (x, y, 0.0, 0.0)))
-    for _ in range(8):
-        targets.append(
-            ScriptedTarget(
-                "ground",
-                _heading_state(
-                    place(8e3, 50e3), rng.uniform(3, 35), rng.uniform(-math.pi, math.pi), t_mid
-                ),
-                q=0.05,
-            )
-        )
-    for _ in range(4):
-        targets.append(
-            ScriptedTarget(
-                "helicopter",
-                _heading_state(
-                    place(10e3, 45e3), rng.uniform(30, 90), rng.uniform(-math.pi, math.pi), t_mid
-                ),
-                q=0.1,
-            )
-        )
+    # (class, count, range band m, speed band m/s, process noise q)
+    for name, count, ranges, speeds, q in (
+        ("ground", 8, (8e3, 50e3), (3, 35), 0.05),
+        ("helicopter", 4, (10e3, 45e3), (30, 90), 0.1),
+    ):
+        for _ in range(count):
+            mid, speed = place(*ranges), rng.uniform(*speeds)
+            heading = rng.uniform(-math.pi, math.pi)
+            targets.append(ScriptedTarget(name, _heading_state(mid, speed, heading, t_mid), q=q))
     for i in range(8):
         speed = rng.uniform(180, 280)
         manoeuvres = ()

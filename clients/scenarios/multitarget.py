@@ -56,6 +56,8 @@ __all__ = [
     "SensorSpec",
     "SimulatedScan",
     "crossing_scenario",
+    "move_targets",
+    "ncv_noise",
     "reference_scenario",
     "scale_scenario",
     "simulate",
@@ -252,7 +254,7 @@ def _draw_turn_rates(rng: np.random.Generator, std: float, count: int) -> np.nda
     return np.where(straight, 0.0, std * rng.standard_normal(count))
 
 
-def _ncv_noise(rng: np.random.Generator, q: float, T: float, count: int) -> np.ndarray:
+def ncv_noise(rng: np.random.Generator, q: float, T: float, count: int) -> np.ndarray:
     """``(count, 4)`` samples of ``N(0, Q)``, Q the NCV noise over ``T``.
 
     Per axis ``Q = q [[T³/3, T²/2], [T²/2, T]] = L Lᵀ`` with the Cholesky factor
@@ -265,7 +267,7 @@ def _ncv_noise(rng: np.random.Generator, q: float, T: float, count: int) -> np.n
     return np.hstack([position, velocity])
 
 
-def _move(states: np.ndarray, omega: np.ndarray | None, T: float) -> np.ndarray:
+def move_targets(states: np.ndarray, omega: np.ndarray | None, T: float) -> np.ndarray:
     """Deterministic motion over ``T``: constant velocity, or exact coordinated turn at ω.
 
     With ``a = ωT``: ``p' = p + T [[sinc a, −(1−cos a)/a], [(1−cos a)/a, sinc a]] v`` and
@@ -326,7 +328,7 @@ def simulate(config: ScenarioConfig) -> list[SimulatedScan]:
                 switch = rng.random(ids.size) < -math.expm1(-T / TURN_SEGMENT_MEAN)
                 new = _draw_turn_rates(rng, config.turn_rate_std, ids.size)
                 omega = np.where(switch, new, omega)
-            states = _move(states, omega, T) + _ncv_noise(rng, config.q, T, ids.size)
+            states = move_targets(states, omega, T) + ncv_noise(rng, config.q, T, ids.size)
             if config.birth_death:
                 born = int(rng.poisson(config.n_targets * T / lifetime))
                 if born:
