@@ -30,8 +30,16 @@ from typing import IO, Any, TypeVar
 import orjson
 import zenoh
 
+from clients.scenarios.airspace import (
+    ScriptedScenario,
+    formation_scenario,
+    manoeuvre_scenario,
+    mixed_speed_scenario,
+    simulate_scripted,
+)
 from clients.scenarios.multitarget import (
     ScenarioConfig,
+    SimulatedScan,
     crossing_scenario,
     reference_scenario,
     scale_scenario,
@@ -56,6 +64,7 @@ __all__ = [
     "publish_batches",
     "run_publisher",
     "scenario_config",
+    "simulated_scans",
 ]
 
 T = TypeVar("T")
@@ -65,6 +74,27 @@ _SCENARIOS: dict[str, Callable[..., ScenarioConfig]] = {
     "scale": scale_scenario,
     "crossing": crossing_scenario,
 }
+
+
+#: Scripted scenarios with range-bearing radars (clients.scenarios.airspace): targets of every
+#: speed. --targets, --scans and --clutter do not apply to them.
+_SCRIPTED: dict[str, Callable[[int], ScriptedScenario]] = {
+    "mixed-speeds": lambda seed: mixed_speed_scenario(period=4.0, seed=seed),
+    "formations": lambda seed: formation_scenario(seed=seed),
+    "manoeuvre": lambda seed: manoeuvre_scenario(seed=seed),
+}
+
+
+def simulated_scans(args: argparse.Namespace) -> list[SimulatedScan]:
+    """The scans of the scenario the flags describe. Raises ``ValueError`` for a flag that
+    does not apply to it."""
+    make = _SCRIPTED.get(args.scenario)
+    if make is None:
+        return simulate(scenario_config(args))
+    given = [f"--{n}" for n in ("targets", "scans", "clutter") if getattr(args, n) is not None]
+    if given:
+        raise ValueError(f"{', '.join(given)}: not for the scripted scenario {args.scenario}")
+    return simulate_scripted(make(args.seed))
 
 
 def scenario_config(args: argparse.Namespace) -> ScenarioConfig:
@@ -280,9 +310,13 @@ def build_parser() -> argparse.ArgumentParser:
     )
     parser.add_argument(
         "--scenario",
-        choices=("reference", "scale", "crossing"),
+        choices=("reference", "scale", "crossing", *_SCRIPTED),
         default="reference",
-        help="which simulated scenario (default reference: 50 targets, 100 scans at 1 s)",
+        help=(
+            "which simulated scenario (default reference: 50 targets, 100 scans at 1 s; "
+            "mixed-speeds: parked cars to 680 m/s jets, one radar at 4 s; formations: paper "
+            "003's two formations, three radars; manoeuvre: 450 m/s pulling 4 g)"
+        ),
     )
     parser.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     parser.add_argument("--scans", type=int, help="number of scans per sensor")
@@ -306,11 +340,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     if not check_pacing(PROG, args):
         return 2
     try:
-        config = scenario_config(args)
+        scans = simulated_scans(args)
     except ValueError as exc:
         print(f"{PROG}: {exc}", file=sys.stderr)
         return 2
-    scans = simulate(config)
 
     def items() -> Iterator[tuple[str, bytes]]:
         batches = ((s.time + args.time_offset, s) for s in scans)

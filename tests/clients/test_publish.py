@@ -7,6 +7,7 @@ import time
 from pathlib import Path
 
 import httpx
+import numpy as np
 import orjson
 import pytest
 
@@ -155,3 +156,28 @@ def test_publish_summary_is_what_the_load_benchmark_parses(
 def test_publish_bad_speed(capsys: pytest.CaptureFixture[str]) -> None:
     assert publish.main(["--speed", "0"]) == 2
     assert capsys.readouterr().err == "tracker-publish: --speed must be > 0\n"
+
+
+def test_publish_mixed_speeds_and_the_default_service_tracks_jets(service: RunningService) -> None:
+    """A newcomer's path: the service as started, the mixed-speed scenario over Zenoh, the
+    tracks over REST: airliners and jets get confirmed tracks with the default configuration."""
+    from clients.scenarios.airspace import mixed_speed_scenario, simulate_scripted
+
+    n = len(simulate_scripted(mixed_speed_scenario(period=4.0, seed=0)))
+    code = publish.main(
+        ["--scenario", "mixed-speeds", "--rate", "max", "-e", service.endpoint, "-q"]
+    )
+    assert code == 0
+    wait_until(lambda: service.engine.seq == n)
+    tracks = httpx.get(service.url + "/api/v1/tracks").json()["tracks"]
+    speeds = sorted(float(np.hypot(*t["velocity"])) for t in tracks)
+    assert len(tracks) >= 24  # of 26 targets
+    assert sum(s > 150 for s in speeds) >= 9  # 8 airliners and 2 jets
+    assert speeds[-1] > 600
+
+
+def test_publish_scripted_scenario_refuses_flags_that_do_not_apply(
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    assert publish.main(["--scenario", "formations", "--targets", "3"]) == 2
+    assert "--targets: not for the scripted scenario formations" in capsys.readouterr().err
