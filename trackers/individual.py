@@ -12,8 +12,11 @@ One step, for a scan at time t with detections z_j (covariances R_j):
 4. GNN over independent clusters, maximising the summed score gain: confirmed tracks first,
    then tentative tracks over the detections left;
 5. IMM update of assigned tracks; hit or miss score increments;
-6. a tentative track at each detection neither assigned nor in a confirmed track's gate,
-   scored L(1) = ln(λ_nt/λ_fa);
+6. initiation from the detections neither assigned nor in a confirmed track's gate ("free"):
+   by default (``two_point``) the candidates of earlier scans pair with them, each pair kept
+   starting a tentative track, and each becomes a candidate itself
+   (:mod:`trackers.initiation`); with ``single_point`` each starts a tentative track scored
+   L(1) = ln(λ_nt/λ_fa);
 7. confirmation and deletion by the sequential test, the drop-from-peak and coasting rules.
 """
 
@@ -30,13 +33,7 @@ from trackers.association.gating import gate
 from trackers.association.gnn import gnn_assign
 from trackers.config import TrackerConfig
 from trackers.filters.imm import imm_combine, imm_predict, imm_update, transition_matrix
-from trackers.initiation import (
-    MIN_PAIR_INTERVAL,
-    Candidates,
-    Pairs,
-    pair_candidates,
-    third_detections,
-)
+from trackers.initiation import MIN_PAIR_INTERVAL, Candidates, pair_candidates
 from trackers.models.measurement import H_POSITION
 from trackers.models.motion import STATE_DIM, build_models
 from trackers.rows import RowArrays, sort_within_groups
@@ -119,7 +116,6 @@ class IndividualTracker:
         self._models = build_models(self._config.motion)
         self._tracks = TrackArrays.empty(len(self._models))
         self._candidates = Candidates.empty()
-        self._pairs = Pairs.empty()
         self._time: float | None = None
         self._next_id = itertools.count(1)
         self._next_origin = 0
@@ -174,12 +170,10 @@ class IndividualTracker:
             tracks = tracks.take(_best_of_each_origin(tracks))
 
         if config.initiation.method == "two_point":
-            born, candidates, pairs = self._initiate_two_point(
-                scan, ~explained, config, pd_sensor, lam_fa
-            )
+            born, candidates = self._initiate_two_point(scan, ~explained, config, pd_sensor, lam_fa)
         else:
             born = self._initiate(scan, ~explained, config, lam_fa)
-            candidates, pairs = Candidates.empty(), Pairs.empty()
+            candidates = Candidates.empty()
         n_old = len(tracks)
         tracks = tracks.concat(born)
 
@@ -196,7 +190,6 @@ class IndividualTracker:
         self._config, self._models, self._pending = config, models, None
         self._tracks = tracks
         self._candidates = candidates
-        self._pairs = pairs
         self._time = t
         state = (tracks, tuple(m.name for m in models), t)
         return StepResult(
@@ -285,86 +278,64 @@ class IndividualTracker:
 
     def _initiate_two_point(
         self, scan: Scan, free: np.ndarray, config: TrackerConfig, pd: float, lam_fa: float
-    ) -> tuple[TrackArrays, Candidates, Pairs]:
+    ) -> tuple[TrackArrays, Candidates]:
         """Velocity-gated two-point initiation (:mod:`trackers.initiation`).
 
-        Pairs of earlier scans that meet a third free detection start tentative tracks; the
-        candidates of earlier scans pair with the free detections left; every free detection
-        becomes a candidate. Returns the new tracks and the candidates and pairs to keep."""
+        The candidates of earlier scans pair with this scan's free detections; each pair kept
+        starts a tentative track holding two detections. Every free detection becomes a
+        candidate. Returns the new tracks and the candidates to keep."""
         init, tm = config.initiation, config.track_management
         t = float(scan.time)
-        miss = float(miss_increment(pd))
-        gamma = config.gating.threshold
-        q = config.motion.q_cv
-
-        tested = self._pairs.take(t - self._pairs.time <= init.candidate_max_age)
-        third = third_detections(
-            tested, scan.z, scan.R, free, t, q=q, gamma=gamma, pd=pd, clutter_density=lam_fa
-        )
-        free_left = free.copy()
-        free_left[third.detection] = False
-        # A pair not extended goes on as its missed branch; rivals of an extended pair (the
-        # same first detection) are dropped.
-        score = _missed_branch(tested.time, tested.score, t, miss)
-        keep = (score > tm.delete_threshold) & ~np.isin(tested.origin, tested.origin[third.pair])
-        pairs = replace(tested, score=score).take(keep)
-
         cand = self._candidates
         cand = cand.take(t - cand.time <= init.candidate_max_age)
         two = pair_candidates(
             cand,
             scan.z,
             scan.R,
-            free_left,
+            free,
             t,
             max_speed=init.max_speed,
             velocity_std=init.velocity_std,
             slow_fraction=init.slow_target_fraction,
-            q=q,
-            gamma=gamma,
+            q=config.motion.q_cv,
+            gamma=config.gating.threshold,
             max_pairs=init.max_pairs_per_candidate,
             pd=pd,
             clutter_density=lam_fa,
             min_score=tm.delete_threshold,
         )
-        new_pairs = Pairs(
-            x=two.x,
-            P=two.P,
-            time=np.full(two.size, t),
-            score=two.score,
-            origin=cand.origin[two.candidate],
-            created=cand.time[two.candidate],
-            detection_ids=_objects([scan.detection_ids[j] for j in two.detection.tolist()]),
-        )
-        score = _missed_branch(cand.time, cand.score, t, miss)
-        cand = replace(cand, score=score).take(score > tm.delete_threshold)
-
-        idx = np.flatnonzero(free_left)
-        L1 = initial_score(tm.new_target_density, lam_fa)
-        fresh = Candidates(
-            z=scan.z[idx],
-            R=scan.R[idx],
-            time=np.full(idx.size, t),
-            score=np.full(idx.size, L1),
-            detection_ids=_objects([scan.detection_ids[j] for j in idx.tolist()]),
-            origin=np.arange(self._next_origin, self._next_origin + idx.size, dtype=np.int64),
-        )
-        self._next_origin += idx.size
-        candidates = cand.concat(fresh)
-        pairs = pairs.concat(new_pairs)
-
         born = self._new_tracks(
             config,
             scan,
-            third.detection,
-            third.x,
-            third.P,
-            score=third.score,
-            hits=3,
-            created=tested.created[third.pair],
-            origin=tested.origin[third.pair],
+            two.detection,
+            two.x,
+            two.P,
+            score=two.score,
+            hits=2,
+            created=cand.time[two.candidate],
+            origin=cand.origin[two.candidate],
         )
-        return born, candidates, pairs
+        # The candidates go on as their missed branches while their score stays above T_d;
+        # every free detection of this scan opens a new one.
+        score = _missed_branch(cand.time, cand.score, t, float(miss_increment(pd)))
+        keep = score > tm.delete_threshold
+        idx = np.flatnonzero(free)
+        n = idx.size
+        fresh_ids = _objects([scan.detection_ids[j] for j in idx.tolist()])
+        candidates = Candidates(
+            z=np.concatenate([cand.z[keep], scan.z[idx]]),
+            R=np.concatenate([cand.R[keep], scan.R[idx]]),
+            time=np.concatenate([cand.time[keep], np.full(n, t)]),
+            score=np.concatenate(
+                [score[keep], np.full(n, initial_score(tm.new_target_density, lam_fa))]
+            ),
+            detection_ids=np.concatenate([cand.detection_ids[keep], fresh_ids]),
+            origin=np.concatenate(
+                [cand.origin[keep], np.arange(self._next_origin, self._next_origin + n)]
+            ),
+        )
+        self._next_origin += n
+        return born, candidates
 
     def _new_tracks(
         self,

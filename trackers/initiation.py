@@ -8,9 +8,9 @@ at most ``v_max`` could make in ``Δt = t − t_c``:
 
     e = d − d · min(1, v_max Δt / |d|),      eᵀ (R_c + R_j)⁻¹ e ≤ γ.
 
-A k-d tree over the free detections, queried with radius
-``v_max Δt + sqrt(γ (λ_max(R_c) + max_j λ_max(R_j)))`` per candidate, finds every such pair
-without forming all pairs of a scan.
+A search around each candidate with radius ``v_max Δt + sqrt(γ (λ_max(R_c) + max_j
+λ_max(R_j)))`` (:func:`trackers.association.spatial.pairs_within`, a k-d tree over the free
+detections in large scenes) finds every such pair without forming all pairs of a scan.
 
 The velocity prior is a two-component mixture: with weight ``w`` a *slow* target,
 ``v ~ N(0, σ_v² I)``; with weight ``1 − w`` a *fast* one, ``v`` uniform over the disc
@@ -35,35 +35,24 @@ A candidate offered a scan continues as its *missed* branch, ``L ← L + ln(1 �
 or not it paired; it is dropped when ``L ≤ T_d`` or when older than ``candidate_max_age``.
 A pair less likely than 1/100 of the best pair of its candidate or of its detection is pruned
 (``PAIR_PRUNE_LOG_RATIO``), and at most ``max_pairs_per_candidate`` pairs a scan (the
-likeliest) start tracks: the number of new tracks per scan is bounded by that many times the
-number of candidates, whatever the clutter. Tracks started from one candidate are rival
-hypotheses; the tracker keeps the likeliest once each has met a scan.
+likeliest) start tentative tracks, each holding its two detections, which meet their third
+detection in the tracker's IMM update like any track: the number of new tracks per scan is
+bounded by that many times the number of candidates, whatever the clutter. Tracks started
+from one candidate are rival hypotheses; the tracker keeps the likeliest once each has met a scan.
 """
 
 from __future__ import annotations
 
-import itertools
 import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.spatial import cKDTree
 
-from trackers.association.gating import gate, inverse_2x2, log_gaussian_2d, max_eigenvalue_2x2
-from trackers.association.gnn import gnn_assign
+from trackers.association.gating import max_eigenvalue_2x2
+from trackers.association.spatial import pairs_within
 from trackers.rows import RowArrays, sort_within_groups
 
-__all__ = [
-    "Candidates",
-    "Pairs",
-    "ThirdDetections",
-    "TwoPointTracks",
-    "cv_predict",
-    "pair_candidates",
-    "position_update",
-    "third_detections",
-    "two_point_estimate",
-]
+__all__ = ["Candidates", "TwoPointTracks", "pair_candidates", "two_point_estimate"]
 
 #: Candidates and detections less than this far apart in time (s) are not paired: they say
 #: nothing about velocity (two sensors' scans at the same instant).
@@ -103,34 +92,6 @@ class Candidates(RowArrays):
 
 
 @dataclass(frozen=True, eq=False)
-class Pairs(RowArrays):
-    """Two-detection hypotheses waiting for a third: the state ``x (k, 4)`` =
-    ``[x, y, vx, vy]`` with covariance ``P (k, 4, 4)`` at ``time (k,)``, the score
-    ``score (k,)``, the candidate's ``origin (k,)`` and time ``created (k,)``, and the
-    ``detection_ids (k,)`` of the pair's second detection."""
-
-    x: np.ndarray
-    P: np.ndarray
-    time: np.ndarray
-    score: np.ndarray
-    origin: np.ndarray
-    created: np.ndarray
-    detection_ids: np.ndarray
-
-    @staticmethod
-    def empty() -> Pairs:
-        return Pairs(
-            x=np.zeros((0, 4)),
-            P=np.zeros((0, 4, 4)),
-            time=np.zeros(0),
-            score=np.zeros(0),
-            origin=np.zeros(0, dtype=np.int64),
-            created=np.zeros(0),
-            detection_ids=np.zeros(0, dtype=object),
-        )
-
-
-@dataclass(frozen=True, eq=False)
 class TwoPointTracks:
     """The pairs that start tracks: ``candidate`` and ``detection`` indices, the state
     ``x (k, 4)`` = ``[x, y, vx, vy]`` at the detection's time with covariance ``P (k, 4, 4)``,
@@ -147,154 +108,14 @@ class TwoPointTracks:
         return int(self.candidate.size)
 
 
-@dataclass(frozen=True, eq=False)
-class ThirdDetections:
-    """Pairs that met a third detection: ``pair`` and ``detection`` indices, the updated
-    state ``x (k, 4)``, ``P (k, 4, 4)`` and score ``score (k,)``."""
-
-    pair: np.ndarray
-    detection: np.ndarray
-    x: np.ndarray
-    P: np.ndarray
-    score: np.ndarray
-
-    @property
-    def size(self) -> int:
-        return int(self.pair.size)
-
-
-def cv_predict(
-    x: np.ndarray, P: np.ndarray, dt: np.ndarray, q: float
-) -> tuple[np.ndarray, np.ndarray]:
-    """Nearly constant velocity prediction of ``[x, y, vx, vy]`` over per-row intervals Δt:
-
-    x⁻ = F x,  F = [[I, Δt I], [0, I]],
-    P⁻_pp = P_pp + Δt (P_pv + P_vp) + Δt² P_vv + q Δt³/3 I,
-    P⁻_pv = P_pv + Δt P_vv + q Δt²/2 I,   P⁻_vv = P_vv + q Δt I.
-    """
-    dt = np.asarray(dt, dtype=float)
-    t1 = dt[:, None, None]
-    I2 = np.eye(2)
-    x_new = x.copy()
-    x_new[:, :2] += dt[:, None] * x[:, 2:]
-    Ppp, Ppv, Pvp, Pvv = P[:, :2, :2], P[:, :2, 2:], P[:, 2:, :2], P[:, 2:, 2:]
-    P_new = np.empty_like(P)
-    P_new[:, :2, :2] = Ppp + t1 * (Ppv + Pvp) + t1**2 * Pvv + (q * t1**3 / 3.0) * I2
-    P_new[:, :2, 2:] = Ppv + t1 * Pvv + (q * t1**2 / 2.0) * I2
-    P_new[:, 2:, :2] = P_new[:, :2, 2:].transpose(0, 2, 1)
-    P_new[:, 2:, 2:] = Pvv + (q * t1) * I2
-    return x_new, P_new
-
-
-def position_update(
-    x: np.ndarray, P: np.ndarray, z: np.ndarray, R: np.ndarray
-) -> tuple[np.ndarray, np.ndarray]:
-    """Kalman update of ``[x, y, vx, vy]`` with a position ``z`` (covariance R):
-    ``S = P_pp + R``, ``K = P Hᵀ S⁻¹``, ``x = x⁻ + K (z − x⁻_p)``, ``P = P⁻ − K S Kᵀ``."""
-    S = P[:, :2, :2] + R
-    S_inv, _ = inverse_2x2(S)
-    K = np.einsum("kij,kjl->kil", P[:, :, :2], S_inv)
-    x_new = x + np.einsum("kij,kj->ki", K, z - x[:, :2])
-    P_new = P - np.einsum("kij,kjl,kml->kim", K, S, K)
-    return x_new, 0.5 * (P_new + P_new.transpose(0, 2, 1))
-
-
-def third_detections(
-    pairs: Pairs,
-    z: np.ndarray,
-    R: np.ndarray,
-    free: np.ndarray,
-    t: float,
-    *,
-    q: float,
-    gamma: float,
-    pd: float,
-    clutter_density: float,
-) -> ThirdDetections:
-    """Test every pair against this scan's free detections: predicted by :func:`cv_predict`,
-    gated by chi-square, assigned one-to-one by GNN on the score gain
-    ``ln(P_D g / λ_fa) − ln(1 − P_D)``, and updated by :func:`position_update`. The score of
-    an extended pair is ``L + ln(P_D g / λ_fa)``."""
-    empty_i = np.zeros(0, dtype=np.intp)
-    none = ThirdDetections(empty_i, empty_i, np.zeros((0, 4)), np.zeros((0, 4, 4)), np.zeros(0))
-    free_idx = np.flatnonzero(free)
-    if len(pairs) == 0 or free_idx.size == 0:
-        return none
-    x_pred, P_pred = cv_predict(pairs.x, pairs.P, t - pairs.time, q)
-    zf, Rf = z[free_idx], R[free_idx]
-    gated = gate(x_pred[:, :2], P_pred[:, :2, :2], zf, Rf, gamma)
-    if gated.size == 0:
-        return none
-    pi, fj = gated.track, gated.detection
-    _, loglik = log_gaussian_2d(zf[fj] - x_pred[pi, :2], P_pred[pi, :2, :2] + Rf[fj])
-    hit = math.log(pd) + loglik - math.log(clutter_density)
-    miss = math.log(max(1.0 - pd, 1e-12))
-    sel = gnn_assign(pi, fj, hit - miss, len(pairs), free_idx.size)
-    pi, fj = pi[sel], fj[sel]
-    x, P = position_update(x_pred[pi], P_pred[pi], zf[fj], Rf[fj])
-    return ThirdDetections(
-        pair=pi, detection=free_idx[fj], x=x, P=P, score=pairs.score[pi] + hit[sel]
-    )
-
-
-def _cv_component(
-    d: np.ndarray, R_c: np.ndarray, R_j: np.ndarray, dt: np.ndarray, var_v: float, q: float
-) -> tuple[np.ndarray, np.ndarray]:
-    """Kalman posterior of ``[p − z_c, v]`` at the second detection.
-
-    Prior at ``t_c``: ``p ~ N(z_c, R_c)``, ``v ~ N(0, σ² I)``; predicted over Δt by the nearly
-    constant velocity model (PSD q):
-
-        P_pp = R_c + a I,  P_pv = b I,  P_vv = c I,
-        a = σ² Δt² + q Δt³/3,  b = σ² Δt + q Δt²/2,  c = σ² + q Δt,
-
-    then updated with ``d = z_j − z_c`` (covariance ``R_j``). With ``S = P_pp + R_j`` and
-    ``A = S⁻¹`` the update reduces to
-
-        x_p = d − R_j A d,  x_v = b A d,
-        P_pp = R_j − R_j A R_j,  P_pv = b R_j A,  P_vv = c I − b² A.
-
-    Returns the mean ``(k, 4)`` and covariance ``(k, 4, 4)``.
-    """
-    a = (var_v * dt**2 + q * dt**3 / 3.0)[:, None, None]
-    b = (var_v * dt + q * dt**2 / 2.0)[:, None, None]
-    c = (var_v + q * dt)[:, None, None]
-    I2 = np.eye(2)
-    A, _ = inverse_2x2(R_c + R_j + a * I2)
-    Ad = _matvec_2x2(A, d)
-    RA = _matmul_2x2(R_j, A)
-    x = np.empty((d.shape[0], 4))
-    x[:, :2] = d - _matvec_2x2(R_j, Ad)
-    x[:, 2:] = b[:, :, 0] * Ad
-    P = np.empty((d.shape[0], 4, 4))
-    P[:, :2, :2] = R_j - _matmul_2x2(RA, R_j)
-    P[:, :2, 2:] = b * RA
-    P[:, 2:, :2] = b * RA.transpose(0, 2, 1)
-    P[:, 2:, 2:] = c * I2 - b**2 * A
-    return x, 0.5 * (P + P.transpose(0, 2, 1))
-
-
-def _matmul_2x2(A: np.ndarray, B: np.ndarray) -> np.ndarray:
-    """``A B`` for stacks of 2x2 matrices, entry by entry (numpy's matmul is slow on them)."""
-    C = np.empty_like(A)
-    C[:, 0, 0] = A[:, 0, 0] * B[:, 0, 0] + A[:, 0, 1] * B[:, 1, 0]
-    C[:, 0, 1] = A[:, 0, 0] * B[:, 0, 1] + A[:, 0, 1] * B[:, 1, 1]
-    C[:, 1, 0] = A[:, 1, 0] * B[:, 0, 0] + A[:, 1, 1] * B[:, 1, 0]
-    C[:, 1, 1] = A[:, 1, 0] * B[:, 0, 1] + A[:, 1, 1] * B[:, 1, 1]
-    return C
-
-
-def _matvec_2x2(A: np.ndarray, v: np.ndarray) -> np.ndarray:
-    """``A v`` for stacks of 2x2 matrices and 2-vectors."""
-    return np.stack(
-        [A[:, 0, 0] * v[:, 0] + A[:, 0, 1] * v[:, 1], A[:, 1, 0] * v[:, 0] + A[:, 1, 1] * v[:, 1]],
-        axis=1,
-    )
+def _entries(R: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The entries ``(r₀₀, r₀₁, r₁₁)`` of symmetric 2x2 matrices ``R (k, 2, 2)``."""
+    return R[:, 0, 0], R[:, 0, 1], R[:, 1, 1]
 
 
 def _component_logliks(
     d: np.ndarray,
-    R_sum: np.ndarray,
+    s: tuple[np.ndarray, np.ndarray, np.ndarray],
     dt: np.ndarray,
     *,
     max_speed: float,
@@ -302,10 +123,21 @@ def _component_logliks(
     slow_fraction: float,
     q: float,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """``ln(w N(d; 0, S_s))`` and ``ln((1 − w) g_f)`` of each pair (module docstring)."""
-    S_s = R_sum + (velocity_std**2 * dt**2 + q * dt**3 / 3.0)[:, None, None] * np.eye(2)
-    _, ll_s = log_gaussian_2d(d, S_s)
-    det = R_sum[:, 0, 0] * R_sum[:, 1, 1] - R_sum[:, 0, 1] * R_sum[:, 1, 0]
+    """``ln(w N(d; 0, S_s))`` and ``ln((1 − w) g_f)`` of each pair (module docstring), with
+    ``s`` the entries of ``R_c + R_j``:
+
+        S_s = R_c + R_j + α I,  α = σ_v² Δt² + q Δt³/3,
+        ln N(d; 0, S_s) = −½ dᵀ S_s⁻¹ d − ln 2π − ½ ln |S_s|,
+        g_f = 1 / (π (v_max Δt)² + 2π |R_c + R_j|^½).
+    """
+    s00, s01, s11 = s
+    alpha = velocity_std**2 * dt**2 + q * dt**3 / 3.0
+    t00, t11 = s00 + alpha, s11 + alpha
+    det_s = t00 * t11 - s01 * s01
+    d0, d1 = d[:, 0], d[:, 1]
+    m2 = (t11 * d0 * d0 - 2.0 * s01 * d0 * d1 + t00 * d1 * d1) / det_s
+    ll_s = -0.5 * m2 - math.log(2.0 * math.pi) - 0.5 * np.log(det_s)
+    det = s00 * s11 - s01 * s01
     ll_f = -np.log(math.pi * (max_speed * dt) ** 2 + 2.0 * math.pi * np.sqrt(det))
     return math.log(slow_fraction) + ll_s, math.log1p(-slow_fraction) + ll_f
 
@@ -344,7 +176,7 @@ def two_point_estimate(
     d = z_j - z_c
     a_s, a_f = _component_logliks(
         d,
-        R_c + R_j,
+        _entries(R_c + R_j),
         dt,
         max_speed=max_speed,
         velocity_std=velocity_std,
@@ -370,26 +202,67 @@ def _mixture_state(
     velocity_std: float,
     q: float,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The moment-matched mixture of the two components' posteriors, relative to ``z_c``,
-    given their log weights ``a_s`` and ``a_f``; and ``ln g₂``."""
+    """The moment-matched mixture of the two components' Kalman posteriors of
+    ``[p − z_c, v]`` at the second detection, given their log weights ``a_s`` and ``a_f``;
+    and ``ln g₂ = ln(e^{a_s} + e^{a_f})``.
+
+    Component m has the prior ``p ~ N(z_c, R_c)``, ``v ~ N(0, σ_m² I)`` (σ_s = σ_v,
+    σ_f² = v_max²/2), predicted over Δt by the nearly constant velocity model (PSD q):
+
+        P_pp = R_c + a I,  P_pv = b I,  P_vv = c I,
+        a = σ² Δt² + q Δt³/3,  b = σ² Δt + q Δt²/2,  c = σ² + q Δt,
+
+    and updated with ``d = z_j − z_c`` (covariance ``R_j``). With ``A = (P_pp + R_j)⁻¹``:
+
+        x_p = d − R_j A d,  x_v = b A d,
+        P_pp = R_j − R_j A R_j,  P_pv = b R_j A,  P_vv = c I − b² A.
+
+    The mixture is ``x = β_s x_s + β_f x_f`` and
+    ``P = β_s P_s + β_f P_f + β_s β_f δ δᵀ`` with ``δ = x_s − x_f``. Both components are
+    computed at once, entry by entry, on ``(2, k)`` arrays.
+    """
     loglik = _log_add(a_s, a_f)
-    x_s, P_s = _cv_component(d, R_c, R_j, dt, velocity_std**2, q)
-    x_f, P_f = _cv_component(d, R_c, R_j, dt, 0.5 * max_speed**2, q)
-    beta_s = np.exp(a_s - loglik)[:, None]
-    beta_f = 1.0 - beta_s
-    x_rel = beta_s * x_s + beta_f * x_f
-    ds, df = x_s - x_rel, x_f - x_rel
-    P = beta_s[:, :, None] * (P_s + ds[:, :, None] * ds[:, None, :]) + beta_f[:, :, None] * (
-        P_f + df[:, :, None] * df[:, None, :]
+    beta = np.exp(np.stack([a_s, a_f]) - loglik)
+    var = np.array([[velocity_std**2], [0.5 * max_speed**2]])
+    a = var * dt**2 + q * dt**3 / 3.0
+    b = var * dt + q * dt**2 / 2.0
+    c = var + q * dt
+    c00, c01, c11 = _entries(R_c)
+    j00, j01, j11 = _entries(R_j)
+    s00, s11 = c00 + j00 + a, c11 + j11 + a
+    s01 = c01 + j01
+    det = s00 * s11 - s01 * s01
+    A00, A01, A11 = s11 / det, -s01 / det, s00 / det
+    d0, d1 = d[:, 0], d[:, 1]
+    Ad0, Ad1 = A00 * d0 + A01 * d1, A01 * d0 + A11 * d1
+    RA00, RA01 = j00 * A00 + j01 * A01, j00 * A01 + j01 * A11
+    RA10, RA11 = j01 * A00 + j11 * A01, j01 * A01 + j11 * A11
+    k = d.shape[0]
+    X = np.empty((2, k, 4))
+    X[:, :, 0] = d0 - (j00 * Ad0 + j01 * Ad1)
+    X[:, :, 1] = d1 - (j01 * Ad0 + j11 * Ad1)
+    X[:, :, 2] = b * Ad0
+    X[:, :, 3] = b * Ad1
+    P = np.empty((2, k, 4, 4))
+    P[:, :, 0, 0] = j00 - (RA00 * j00 + RA01 * j01)
+    P[:, :, 0, 1] = P[:, :, 1, 0] = j01 - (RA00 * j01 + RA01 * j11)
+    P[:, :, 1, 1] = j11 - (RA10 * j01 + RA11 * j11)
+    P[:, :, 0, 2] = P[:, :, 2, 0] = b * RA00
+    P[:, :, 0, 3] = P[:, :, 3, 0] = b * RA01
+    P[:, :, 1, 2] = P[:, :, 2, 1] = b * RA10
+    P[:, :, 1, 3] = P[:, :, 3, 1] = b * RA11
+    b2 = b * b
+    P[:, :, 2, 2] = c - b2 * A00
+    P[:, :, 2, 3] = P[:, :, 3, 2] = -b2 * A01
+    P[:, :, 3, 3] = c - b2 * A11
+    x = beta[0][:, None] * X[0] + beta[1][:, None] * X[1]
+    delta = X[0] - X[1]
+    P_mix = (
+        beta[0][:, None, None] * P[0]
+        + beta[1][:, None, None] * P[1]
+        + (beta[0] * beta[1])[:, None, None] * (delta[:, :, None] * delta[:, None, :])
     )
-    return x_rel, P, loglik
-
-
-def _group_max(group: np.ndarray, value: np.ndarray) -> np.ndarray:
-    """For each element, the largest ``value`` among the elements of its ``group``."""
-    top = np.full(int(group.max()) + 1, -np.inf)
-    np.maximum.at(top, group, value)
-    return top[group]
+    return x, P_mix, loglik
 
 
 def pair_candidates(
@@ -412,7 +285,10 @@ def pair_candidates(
     """Every (candidate, free detection) pair a target no faster than ``max_speed`` could
     make, at most ``max_pairs`` per candidate (the highest scores), with the two-point state
     and the score ``L = L_c + ln(P_D g₂ / λ_fa)``; pairs with ``L ≤ min_score`` (the deletion
-    threshold of the sequential test) are left out. Detections are indexed into ``z``."""
+    threshold of the sequential test) are left out. Detections are indexed into ``z``.
+
+    The velocity gate of the module docstring is ``ρ² dᵀ (R_c + R_j)⁻¹ d ≤ γ`` with
+    ``ρ = max(0, 1 − v_max Δt / |d|)``: the part of ``d`` beyond the reach of ``v_max``."""
     empty_i = np.zeros(0, dtype=np.intp)
     none = TwoPointTracks(empty_i, empty_i, np.zeros((0, 4)), np.zeros((0, 4, 4)), np.zeros(0))
     dt_all = t - candidates.time
@@ -424,44 +300,49 @@ def pair_candidates(
     noise = float(max_eigenvalue_2x2(Rf).max())
     zc, Rc = candidates.z[offered], candidates.R[offered]
     radius = max_speed * dt_all[offered] + np.sqrt(gamma * (max_eigenvalue_2x2(Rc) + noise))
-    hits = cKDTree(zf).query_ball_point(zc, radius, return_sorted=False)
-    counts = np.fromiter(map(len, hits), dtype=np.intp, count=len(hits))
-    if counts.sum() == 0:
+    i, fj = pairs_within(zc, radius, zf)
+    n = i.size
+    if n == 0:
         return none
-    ci = np.repeat(offered, counts)
-    fj = np.fromiter(itertools.chain.from_iterable(hits), dtype=np.intp, count=int(counts.sum()))
+    ci = offered[i]  # grouped by candidate, in candidate order
     dt = dt_all[ci]
     d = zf[fj] - candidates.z[ci]
     R_sum = candidates.R[ci] + Rf[fj]
-    dist = np.sqrt(np.einsum("ki,ki->k", d, d))
-    reach = max_speed * dt
-    e = d * (1.0 - np.minimum(1.0, reach / np.maximum(dist, 1e-300)))[:, None]
-    S_inv, _ = inverse_2x2(R_sum)
-    keep = np.einsum("ki,kij,kj->k", e, S_inv, e) <= gamma
-    if not keep.any():
-        return none
-    ci, fj, dt, d, R_sum = ci[keep], fj[keep], dt[keep], d[keep], R_sum[keep]
+    s = _entries(R_sum)
+    d0, d1 = d[:, 0], d[:, 1]
+    rho = np.maximum(0.0, 1.0 - max_speed * dt / np.maximum(np.hypot(d0, d1), 1e-300))
+    s00, s01, s11 = s
+    m2 = (s11 * d0 * d0 - 2.0 * s01 * d0 * d1 + s00 * d1 * d1) / (s00 * s11 - s01 * s01)
     a_s, a_f = _component_logliks(
         d,
-        R_sum,
+        s,
         dt,
         max_speed=max_speed,
         velocity_std=velocity_std,
         slow_fraction=slow_fraction,
         q=q,
     )
-    score = candidates.score[ci] + math.log(pd) + _log_add(a_s, a_f) - math.log(clutter_density)
+    score = candidates.score[ci] + (math.log(pd) - math.log(clutter_density)) + _log_add(a_s, a_f)
+    score[rho * rho * m2 > gamma] = -np.inf
     # Rival pairs of one candidate, or of one detection, are pruned when far less likely than
     # the best of them; then the ``max_pairs`` best of each candidate are kept.
-    good = (
+    new_group = np.empty(n, dtype=bool)
+    new_group[0] = True
+    np.not_equal(ci[1:], ci[:-1], out=new_group[1:])
+    group = np.cumsum(new_group) - 1
+    best_c = np.maximum.reduceat(score, np.flatnonzero(new_group))[group]
+    best_d = np.full(free_idx.size, -np.inf)
+    np.maximum.at(best_d, fj, score)
+    good = np.flatnonzero(
         (score > min_score)
-        & (score >= _group_max(ci, score) - PAIR_PRUNE_LOG_RATIO)
-        & (score >= _group_max(fj, score) - PAIR_PRUNE_LOG_RATIO)
+        & (score >= best_c - PAIR_PRUNE_LOG_RATIO)
+        & (score >= best_d[fj] - PAIR_PRUNE_LOG_RATIO)
     )
-    good = np.flatnonzero(good)
+    if good.size == 0:
+        return none
     by_candidate, rank = sort_within_groups(ci[good], score[good])
     order = good[by_candidate[rank < max_pairs]]
-    ci, fj, score = ci[order], fj[order], score[order]
+    ci, fj = ci[order], fj[order]
     x, P, _ = _mixture_state(
         d[order],
         candidates.R[ci],
@@ -474,4 +355,4 @@ def pair_candidates(
         q=q,
     )
     x[:, :2] += candidates.z[ci]
-    return TwoPointTracks(candidate=ci, detection=free_idx[fj], x=x, P=P, score=score)
+    return TwoPointTracks(candidate=ci, detection=free_idx[fj], x=x, P=P, score=score[order])

@@ -19,7 +19,10 @@ class RowArrays:
         return len(getattr(self, next(iter(self.__dataclass_fields__))))
 
     def take(self, index: np.ndarray) -> Self:
-        """The rows at ``index`` (integer indices or a boolean mask)."""
+        """The rows at ``index`` (integer indices or a boolean mask); ``self`` itself when a
+        mask keeps every row (the arrays are never written in place)."""
+        if index.dtype == bool and index.all():
+            return self
         return type(self)(**{k: getattr(self, k)[index] for k in self.__dataclass_fields__})
 
     def concat(self, other: Self) -> Self:

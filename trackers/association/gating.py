@@ -1,4 +1,4 @@
-"""Gating: a spatial pre-gate on a k-d tree, then the chi-square gate on each candidate pair.
+"""Gating: a spatial pre-gate, then the chi-square gate on each candidate pair.
 
 For a track with predicted position ``ẑ_i`` and predicted position covariance ``P_i`` (the
 position block of ``H P⁻ Hᵀ``), and a detection ``z_j`` with covariance ``R_j``, the pair is in
@@ -7,9 +7,10 @@ the gate when
     d²_ij = ν_ijᵀ S_ij⁻¹ ν_ij ≤ γ,   ν_ij = z_j − ẑ_i,   S_ij = P_i + R_j.
 
 Since ``d² ≥ |ν|² / λ_max(S)`` and ``λ_max(S) ≤ λ_max(P_i) + max_j λ_max(R_j)``, no pair with
-``|ν| > r_i = sqrt(γ (λ_max(P_i) + max_j λ_max(R_j)))`` can pass: the k-d tree query with
-that radius finds every candidate, so the cost grows with the number of nearby pairs rather
-than with the product of the numbers of tracks and detections.
+``|ν| > r_i = sqrt(γ (λ_max(P_i) + max_j λ_max(R_j)))`` can pass: the search with that
+radius (:func:`trackers.association.spatial.pairs_within`, a k-d tree in large scenes) finds
+every candidate, so the cost grows with the number of nearby pairs rather than with the
+product of the numbers of tracks and detections.
 """
 
 from __future__ import annotations
@@ -17,7 +18,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.spatial import cKDTree
+
+from trackers.association.spatial import pairs_within
 
 __all__ = ["GatedPairs", "gate", "inverse_2x2", "log_gaussian_2d", "max_eigenvalue_2x2"]
 
@@ -88,14 +90,7 @@ def gate(
     if z_pred.shape[0] == 0 or z.shape[0] == 0:
         return GatedPairs(empty, empty, np.zeros(0))
     radius = np.sqrt(gamma * (max_eigenvalue_2x2(P_pred) + float(max_eigenvalue_2x2(R).max())))
-    # One radius for the tree search (the largest), then each track's own radius.
-    near = cKDTree(z_pred).sparse_distance_matrix(
-        cKDTree(z), float(radius.max()), output_type="ndarray"
-    )
-    ti = near["i"].astype(np.intp)
-    keep = near["v"] <= radius[ti]
-    ti = ti[keep]
-    dj = near["j"].astype(np.intp)[keep]
+    ti, dj = pairs_within(z_pred, radius, z)
     if ti.size == 0:
         return GatedPairs(empty, empty, np.zeros(0))
     nu = z[dj] - z_pred[ti]

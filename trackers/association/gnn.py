@@ -4,7 +4,14 @@ Each gated pair (i, j) has a gain ``G_ij``: the change in track score of taking 
 rather than missing it, ``G_ij = ln(P_D g_ij / λ_fa) − ln(1 − P_D)``. GNN picks the one-to-one
 assignment that maximises the summed gain, any track or detection being free to stay
 unassigned (gain 0). Pairs with ``G_ij ≤ 0`` are never worth taking and are dropped first.
-Within a cluster the optimum is found with ``scipy.optimize.linear_sum_assignment``.
+
+A pair whose track and detection appear in no other pair is taken as it is. The other pairs
+form clusters (:mod:`trackers.association.clusters`) that cannot change each other's answer;
+``scipy.optimize.linear_sum_assignment`` solves them. When the tracks and detections of all
+clusters together make a small matrix (at most ``JOINT_CELLS`` cells) they are solved in one
+call, the non-gated cells at gain 0: the optimum of that block-diagonal problem is the union
+of the clusters' optima, and one call costs less than one per cluster. Larger problems are
+solved cluster by cluster, so the cost grows with the clusters' sizes, not the scene's.
 """
 
 from __future__ import annotations
@@ -14,7 +21,10 @@ from scipy.optimize import linear_sum_assignment
 
 from trackers.association.clusters import cluster_pairs
 
-__all__ = ["gnn_assign"]
+__all__ = ["JOINT_CELLS", "gnn_assign"]
+
+#: The largest (tracks × detections) matrix solved in one assignment call.
+JOINT_CELLS = 4096
 
 
 def gnn_assign(
@@ -25,19 +35,50 @@ def gnn_assign(
     Returns the indices of the chosen pairs into ``track``, ``detection`` and ``gain``.
     """
     worth = np.flatnonzero(gain > 0)
+    if worth.size == 0:
+        return worth
     track, detection, gain = track[worth], detection[worth], gain[worth]
-    clusters = cluster_pairs(track, detection, n_tracks, n_dets)
-    chosen = [clusters.singles]
-    for pairs in clusters.groups:
-        t_local, t_idx = np.unique(track[pairs], return_inverse=True)
-        d_local, d_idx = np.unique(detection[pairs], return_inverse=True)
-        # Non-gated cells get gain 0: choosing one adds nothing and is discarded below,
-        # which makes the forced rectangular assignment equal to the optional one.
-        G = np.zeros((t_local.size, d_local.size))
-        G[t_idx, d_idx] = gain[pairs]
-        pair_of = np.full((t_local.size, d_local.size), -1, dtype=np.intp)
-        pair_of[t_idx, d_idx] = pairs
-        rows, cols = linear_sum_assignment(G, maximize=True)
-        picked = pair_of[rows, cols]
-        chosen.append(picked[picked >= 0])
+    track_degree = np.bincount(track, minlength=n_tracks)
+    det_degree = np.bincount(detection, minlength=n_dets)
+    lone = (track_degree[track] == 1) & (det_degree[detection] == 1)
+    rest = np.flatnonzero(~lone)
+    if rest.size == 0:
+        return worth
+    n_t = np.count_nonzero(track_degree) - (lone.size - rest.size)
+    n_d = np.count_nonzero(det_degree) - (lone.size - rest.size)
+    chosen = [np.flatnonzero(lone)]
+    if n_t * n_d <= JOINT_CELLS:
+        groups: tuple[np.ndarray, ...] = (rest,)
+    else:
+        clusters = cluster_pairs(track[rest], detection[rest], n_tracks, n_dets)
+        chosen.append(rest[clusters.singles])
+        groups = tuple(rest[g] for g in clusters.groups)
+    for pairs in groups:
+        chosen.append(_solve(track[pairs], detection[pairs], gain[pairs], pairs))
     return worth[np.concatenate(chosen)]
+
+
+def _solve(
+    track: np.ndarray, detection: np.ndarray, gain: np.ndarray, pairs: np.ndarray
+) -> np.ndarray:
+    """The ``pairs`` chosen by the optimal assignment of one or more clusters. Non-gated cells
+    get gain 0: choosing one adds nothing and is discarded, which makes the forced rectangular
+    assignment equal to the optional one."""
+    t_idx, n_t = _compact(track)
+    d_idx, n_d = _compact(detection)
+    G = np.zeros((n_t, n_d))
+    G[t_idx, d_idx] = gain
+    pair_of = np.full((n_t, n_d), -1, dtype=np.intp)
+    pair_of[t_idx, d_idx] = pairs
+    rows, cols = linear_sum_assignment(G, maximize=True)
+    picked = pair_of[rows, cols]
+    return picked[picked >= 0]
+
+
+def _compact(index: np.ndarray) -> tuple[np.ndarray, int]:
+    """``index`` renumbered 0, 1, … in increasing order of its distinct values, and their
+    count (``np.unique(index, return_inverse=True)`` without its sort)."""
+    present = np.zeros(int(index.max()) + 1, dtype=bool)
+    present[index] = True
+    rank = np.cumsum(present) - 1
+    return rank[index], int(rank[-1]) + 1

@@ -3,6 +3,7 @@ import itertools
 import numpy as np
 import pytest
 
+from trackers.association import gnn
 from trackers.association.clusters import cluster_pairs
 from trackers.association.gnn import gnn_assign
 
@@ -47,8 +48,12 @@ def test_gnn_leaves_pairs_with_no_gain_unassigned():
     ]
 
 
+@pytest.mark.parametrize("joint_cells", [gnn.JOINT_CELLS, 0])
 @pytest.mark.parametrize("seed", range(20))
-def test_gnn_matches_brute_force_on_random_problems(seed):
+def test_gnn_matches_brute_force_on_random_problems(seed, joint_cells, monkeypatch):
+    """The optimum, whether the clusters are solved together (the default for small problems)
+    or one by one (``JOINT_CELLS = 0``, as for large ones)."""
+    monkeypatch.setattr(gnn, "JOINT_CELLS", joint_cells)
     rng = np.random.default_rng(seed)
     n_t, n_d = 4, 5
     pairs = [(i, j) for i in range(n_t) for j in range(n_d) if rng.random() < 0.4]
@@ -63,3 +68,26 @@ def test_gnn_matches_brute_force_on_random_problems(seed):
     lookup = {(a, b): g for a, b, g in zip(track.tolist(), det.tolist(), gain, strict=True)}
     total = sum(lookup[(a, b)] for a, b in zip(t.tolist(), d.tolist(), strict=True))
     assert total == pytest.approx(brute_force_best(track.tolist(), det.tolist(), gain.tolist()))
+
+
+def test_joint_and_per_cluster_solutions_take_the_same_gain():
+    """Many small clusters of a large scene: solving them together and one by one gives the
+    same summed gain, and each track and detection at most once."""
+    rng = np.random.default_rng(7)
+    n = 300
+    track = np.repeat(np.arange(n), 3)
+    det = np.clip(track + rng.integers(-2, 3, track.size), 0, n - 1)
+    pairs = np.unique(np.stack([track, det], axis=1), axis=0)
+    track, det = pairs[:, 0], pairs[:, 1]
+    gain = rng.normal(2.0, 2.0, track.size)
+    totals = []
+    for cells in (10**9, 0):
+        gnn_old = gnn.JOINT_CELLS
+        gnn.JOINT_CELLS = cells
+        try:
+            sel = gnn_assign(track, det, gain, n, n)
+        finally:
+            gnn.JOINT_CELLS = gnn_old
+        assert np.unique(track[sel]).size == sel.size == np.unique(det[sel]).size
+        totals.append(gain[sel].sum())
+    assert totals[0] == pytest.approx(totals[1])
