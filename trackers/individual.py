@@ -13,10 +13,10 @@ One step, for a scan at time t with detections z_j (covariances R_j):
    then tentative tracks over the detections left;
 5. IMM update of assigned tracks; hit or miss score increments;
 6. initiation from the detections neither assigned nor in a confirmed track's gate ("free"):
-   by default (``two_point``) the candidates of earlier scans pair with them, each pair kept
-   starting a tentative track, and each becomes a candidate itself
-   (:mod:`trackers.initiation`); with ``single_point`` each starts a tentative track scored
-   L(1) = ln(λ_nt/λ_fa);
+   by default (``two_point``, :mod:`trackers.initiation`) the candidates of earlier scans
+   pair with them, and with those a tentative track took when the pair scores higher, each
+   pair kept starting a tentative track; each free detection becomes a candidate. With
+   ``single_point`` each free detection starts a tentative track scored L(1) = ln(λ_nt/λ_fa);
 7. confirmation and deletion by the sequential test, the drop-from-peak and coasting rules.
 """
 
@@ -161,18 +161,17 @@ class IndividualTracker:
         pd_sensor = tm.pd if scan.pd is None else float(scan.pd)
         lam_fa = tm.clutter_density if scan.clutter_density is None else float(scan.clutter_density)
 
-        n_det = scan.size
-        explained = np.zeros(n_det, dtype=bool)
+        claims = np.full(scan.size, -np.inf)
         if len(tracks):
-            tracks, explained = self._update_existing(
+            tracks, claims = self._update_existing(
                 tracks, models, config, scan, dt, pd_sensor, lam_fa, cells
             )
             tracks = tracks.take(_best_of_each_origin(tracks))
 
         if config.initiation.method == "two_point":
-            born, candidates = self._initiate_two_point(scan, ~explained, config, pd_sensor, lam_fa)
+            born, candidates = self._initiate_two_point(scan, claims, config, pd_sensor, lam_fa)
         else:
-            born = self._initiate(scan, ~explained, config, lam_fa)
+            born = self._initiate(scan, claims == -np.inf, config, lam_fa)
             candidates = Candidates.empty()
         n_old = len(tracks)
         tracks = tracks.concat(born)
@@ -210,6 +209,9 @@ class IndividualTracker:
         lam_fa: float,
         cells: Sequence[ResolutionCell],
     ) -> tuple[TrackArrays, np.ndarray]:
+        """The tracks updated with this scan, and each detection's *claim*: ``+inf`` where a
+        confirmed track took it or has it in its gate, the updated score of the tentative
+        track that took it, ``−inf`` where it is free."""
         Pi = transition_matrix(config.motion.sojourn_times, dt)
         x_pred, P_pred, c_bar = imm_predict(models, tracks.x, tracks.P, tracks.mu, Pi, dt)
         xc, Pc = imm_combine(x_pred, P_pred, c_bar)
@@ -258,9 +260,10 @@ class IndividualTracker:
         # A detection in a confirmed track's gate belongs to that target's neighbourhood: when
         # the track did not take it, it is far likelier clutter or a second detection of the
         # same target than a new one, and starting a track on it would make a duplicate.
-        assigned = np.zeros(scan.size, dtype=bool)
-        assigned[ad] = True
-        assigned[dj[tracks.confirmed[ti]]] = True
+        claims = np.full(scan.size, -np.inf)
+        claims[ad] = score[at]
+        claims[dj[tracks.confirmed[ti]]] = np.inf
+        claims[ad[tracks.confirmed[at]]] = np.inf
         new = replace(
             tracks,
             x=x,
@@ -274,16 +277,19 @@ class IndividualTracker:
             updated=updated,
             detection_ids=det_ids,
         )
-        return new, assigned
+        return new, claims
 
     def _initiate_two_point(
-        self, scan: Scan, free: np.ndarray, config: TrackerConfig, pd: float, lam_fa: float
+        self, scan: Scan, claims: np.ndarray, config: TrackerConfig, pd: float, lam_fa: float
     ) -> tuple[TrackArrays, Candidates]:
         """Velocity-gated two-point initiation (:mod:`trackers.initiation`).
 
-        The candidates of earlier scans pair with this scan's free detections; each pair kept
-        starts a tentative track holding two detections. Every free detection becomes a
-        candidate. Returns the new tracks and the candidates to keep."""
+        The candidates of earlier scans pair with this scan's detections that no confirmed
+        track claims (see :meth:`_update_existing`); each pair kept starts a tentative track
+        holding two detections. A pair on a detection that a tentative track took must score
+        higher than that track: the target's own start is then not lost to a weaker track
+        that crossed its path, and the two compete for the next detection. Every free
+        detection becomes a candidate. Returns the new tracks and the candidates to keep."""
         init, tm = config.initiation, config.track_management
         t = float(scan.time)
         cand = self._candidates
@@ -292,7 +298,7 @@ class IndividualTracker:
             cand,
             scan.z,
             scan.R,
-            free,
+            claims < np.inf,
             t,
             max_speed=init.max_speed,
             velocity_std=init.velocity_std,
@@ -302,7 +308,7 @@ class IndividualTracker:
             max_pairs=init.max_pairs_per_candidate,
             pd=pd,
             clutter_density=lam_fa,
-            min_score=tm.delete_threshold,
+            min_score=np.maximum(claims, tm.delete_threshold),
         )
         born = self._new_tracks(
             config,
@@ -319,7 +325,7 @@ class IndividualTracker:
         # every free detection of this scan opens a new one.
         score = _missed_branch(cand.time, cand.score, t, float(miss_increment(pd)))
         keep = score > tm.delete_threshold
-        idx = np.flatnonzero(free)
+        idx = np.flatnonzero(claims == -np.inf)
         n = idx.size
         fresh_ids = _objects([scan.detection_ids[j] for j in idx.tolist()])
         candidates = Candidates(

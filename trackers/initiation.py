@@ -280,12 +280,13 @@ def pair_candidates(
     max_pairs: int,
     pd: float,
     clutter_density: float,
-    min_score: float = -math.inf,
+    min_score: float | np.ndarray = -math.inf,
 ) -> TwoPointTracks:
     """Every (candidate, free detection) pair a target no faster than ``max_speed`` could
     make, at most ``max_pairs`` per candidate (the highest scores), with the two-point state
-    and the score ``L = L_c + ln(P_D g₂ / λ_fa)``; pairs with ``L ≤ min_score`` (the deletion
-    threshold of the sequential test) are left out. Detections are indexed into ``z``.
+    and the score ``L = L_c + ln(P_D g₂ / λ_fa)``; pairs with ``L ≤ min_score`` (a number,
+    such as the deletion threshold of the sequential test, or one per detection of ``z``)
+    are left out. Detections are indexed into ``z``.
 
     The velocity gate of the module docstring is ``ρ² dᵀ (R_c + R_j)⁻¹ d ≤ γ`` with
     ``ρ = max(0, 1 − v_max Δt / |d|)``: the part of ``d`` beyond the reach of ``v_max``."""
@@ -333,8 +334,9 @@ def pair_candidates(
     best_c = np.maximum.reduceat(score, np.flatnonzero(new_group))[group]
     best_d = np.full(free_idx.size, -np.inf)
     np.maximum.at(best_d, fj, score)
+    floor = min_score if np.ndim(min_score) == 0 else np.asarray(min_score)[free_idx][fj]
     good = np.flatnonzero(
-        (score > min_score)
+        (score > floor)
         & (score >= best_c - PAIR_PRUNE_LOG_RATIO)
         & (score >= best_d[fj] - PAIR_PRUNE_LOG_RATIO)
     )

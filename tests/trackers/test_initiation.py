@@ -162,3 +162,47 @@ def test_two_targets_a_formation_apart_get_two_tracks():
     assert len(conf) == 2
     for t in conf:
         np.testing.assert_allclose(t.velocity, v, atol=25.0)
+
+
+def test_a_start_is_not_lost_to_a_weaker_tentative_track_crossing_it():
+    """A fast tentative track made of two false alarms passes over a parked target and takes
+    its second detection. The target's own pair scores higher than that track, so it still
+    starts a track at that scan, at rest, beside the one that took the detection."""
+    tr = IndividualTracker(TrackerConfig())
+    lam = 1e-6
+    tr.step(scan_at(-1.0, [[0.0, -200.0]], lam=lam))  # false alarms at 100 m/s ...
+    tr.step(scan_at(0.0, [[0.0, -100.0], [5.0, 0.0]], lam=lam))  # ... and the target
+    res = tr.step(scan_at(1.0, [[0.0, 0.0]], lam=lam))
+    crossing = [t for t in res.tracks if t.hits == 3]
+    assert crossing and crossing[0].velocity[1] > 30.0  # the detection went to this one
+    at_rest = [t for t in res.tracks if t.hits == 2 and np.hypot(*t.velocity) < 30.0]
+    assert len(at_rest) == 1 and np.hypot(*at_rest[0].position) < 30.0
+
+
+def test_pairs_below_a_detections_floor_are_left_out():
+    """``min_score`` per detection: the same pair is kept under a low floor and dropped under
+    one above its score."""
+    cand = Candidates(
+        z=np.zeros((1, 2)),
+        R=np.tile(100.0 * np.eye(2), (1, 1, 1)),
+        time=np.zeros(1),
+        score=np.zeros(1),
+        detection_ids=np.empty(1, dtype=object),
+        origin=np.arange(1),
+    )
+    z = np.array([[5.0, 0.0]])
+    R = np.tile(100.0 * np.eye(2), (1, 1, 1))
+    kw = dict(
+        max_speed=700.0,
+        velocity_std=15.0,
+        slow_fraction=0.8,
+        q=0.5,
+        gamma=18.4,
+        max_pairs=8,
+        pd=0.9,
+        clutter_density=1e-6,
+    )
+    kept = pair_candidates(cand, z, R, np.ones(1, dtype=bool), 1.0, min_score=np.zeros(1), **kw)
+    assert kept.size == 1
+    floor = np.array([kept.score[0] + 0.1])
+    assert pair_candidates(cand, z, R, np.ones(1, dtype=bool), 1.0, min_score=floor, **kw).size == 0
