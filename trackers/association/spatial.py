@@ -2,14 +2,12 @@
 
 ``pairs_within(c, r, p)`` gives every pair (i, j) with ``|p_j − c_i| ≤ r_i``. Small problems
 (at most ``BRUTE_FORCE_CELLS`` centre-point pairs) are answered by computing every distance,
-which costs a few array operations; larger ones by a k-d tree over the points, whose cost
-grows with the number of nearby pairs rather than with the product of the two counts.
+which costs a few array operations; larger ones by k-d trees over centres and points, whose
+cost grows with the number of nearby pairs rather than with the product of the two counts.
 Both give the pairs ordered by centre, then by point.
 """
 
 from __future__ import annotations
-
-import itertools
 
 import numpy as np
 from scipy.spatial import cKDTree
@@ -34,8 +32,12 @@ def pairs_within(
         dy = points[None, :, 1] - centres[:, 1, None]
         i, j = np.nonzero(dx * dx + dy * dy <= (radius * radius)[:, None])
         return i.astype(np.intp), j.astype(np.intp)
-    hits = cKDTree(points).query_ball_point(centres, radius, return_sorted=True)
-    counts = np.fromiter(map(len, hits), dtype=np.intp, count=n)
-    i = np.repeat(np.arange(n, dtype=np.intp), counts)
-    j = np.fromiter(itertools.chain.from_iterable(hits), dtype=np.intp, count=int(counts.sum()))
-    return i, j
+    # One search with the largest radius between two trees, then each centre's own radius.
+    near = cKDTree(centres).sparse_distance_matrix(
+        cKDTree(points), float(radius.max()), output_type="ndarray"
+    )
+    i = near["i"].astype(np.intp)
+    keep = near["v"] <= radius[i]
+    i, j = i[keep], near["j"].astype(np.intp)[keep]
+    order = np.argsort(i * m + j)
+    return i[order], j[order]
