@@ -262,8 +262,7 @@ class IndividualTracker:
         # same target than a new one, and starting a track on it would make a duplicate.
         claims = np.full(scan.size, -np.inf)
         claims[ad] = score[at]
-        claims[dj[tracks.confirmed[ti]]] = np.inf
-        claims[ad[tracks.confirmed[at]]] = np.inf
+        claims[dj[tracks.confirmed[ti]]] = np.inf  # a confirmed track's detections included
         new = replace(
             tracks,
             x=x,

@@ -19,6 +19,25 @@ def scan_at(t, points, sigma=30.0, lam=1e-8, pd=0.9):
     )
 
 
+def candidates_at(z, variance=100.0):
+    """Candidates of score 0 at time 0, one per row of ``z``, with covariance ``variance I``."""
+    n = len(z)
+    return Candidates(
+        z=np.asarray(z, dtype=float),
+        R=np.tile(variance * np.eye(2), (n, 1, 1)),
+        time=np.zeros(n),
+        score=np.zeros(n),
+        detection_ids=np.empty(n, dtype=object),
+        origin=np.arange(n),
+    )
+
+
+#: pair_candidates settings of the hand-made cases (the defaults' max speed and gate).
+PAIRING = dict(
+    max_speed=700.0, velocity_std=15.0, slow_fraction=0.8, q=0.5, gamma=18.4, max_pairs=8, pd=0.9
+)
+
+
 def test_fast_component_is_the_two_point_difference():
     """With v_max Δt far beyond the noise and a negligible slow weight the state is the
     classical two-point estimate: p = z_j, v = (z_j − z_c)/Δt, cov(v) = (R_c + R_j)/Δt²."""
@@ -106,30 +125,11 @@ def test_candidate_pairs_stay_bounded_in_dense_clutter():
     max_pairs_per_candidate pairs, found through the k-d tree."""
     rng = np.random.default_rng(2)
     n = 2000
-    cand = Candidates(
-        z=rng.uniform(-1000, 1000, (n, 2)),
-        R=np.tile(100.0 * np.eye(2), (n, 1, 1)),
-        time=np.zeros(n),
-        score=np.zeros(n),
-        detection_ids=np.empty(n, dtype=object),
-        origin=np.arange(n),
-    )
+    cand = candidates_at(rng.uniform(-1000, 1000, (n, 2)))
     z = rng.uniform(-1000, 1000, (n, 2))
     R = np.tile(100.0 * np.eye(2), (n, 1, 1))
     pairs = pair_candidates(
-        cand,
-        z,
-        R,
-        np.ones(n, dtype=bool),
-        1.0,
-        max_speed=700.0,
-        velocity_std=15.0,
-        slow_fraction=0.8,
-        q=0.5,
-        gamma=18.4,
-        max_pairs=8,
-        pd=0.9,
-        clutter_density=1e-4,
+        cand, z, R, np.ones(n, dtype=bool), 1.0, clutter_density=1e-4, **PAIRING
     )
     per_candidate = np.bincount(pairs.candidate, minlength=n)
     assert per_candidate.max() <= 8
@@ -182,26 +182,10 @@ def test_a_start_is_not_lost_to_a_weaker_tentative_track_crossing_it():
 def test_pairs_below_a_detections_floor_are_left_out():
     """``min_score`` per detection: the same pair is kept under a low floor and dropped under
     one above its score."""
-    cand = Candidates(
-        z=np.zeros((1, 2)),
-        R=np.tile(100.0 * np.eye(2), (1, 1, 1)),
-        time=np.zeros(1),
-        score=np.zeros(1),
-        detection_ids=np.empty(1, dtype=object),
-        origin=np.arange(1),
-    )
+    cand = candidates_at(np.zeros((1, 2)))
     z = np.array([[5.0, 0.0]])
     R = np.tile(100.0 * np.eye(2), (1, 1, 1))
-    kw = dict(
-        max_speed=700.0,
-        velocity_std=15.0,
-        slow_fraction=0.8,
-        q=0.5,
-        gamma=18.4,
-        max_pairs=8,
-        pd=0.9,
-        clutter_density=1e-6,
-    )
+    kw = dict(clutter_density=1e-6, **PAIRING)
     kept = pair_candidates(cand, z, R, np.ones(1, dtype=bool), 1.0, min_score=np.zeros(1), **kw)
     assert kept.size == 1
     floor = np.array([kept.score[0] + 0.1])

@@ -12,7 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["PairClusters", "cluster_pairs"]
+__all__ = ["PairClusters", "cluster_pairs", "lone_pairs"]
 
 
 @dataclass(frozen=True)
@@ -27,6 +27,14 @@ class PairClusters:
     groups: tuple[np.ndarray, ...]
 
 
+def lone_pairs(track: np.ndarray, detection: np.ndarray, n_tracks: int, n_dets: int) -> np.ndarray:
+    """Mask of the pairs whose track and detection appear in no other pair: clusters of
+    one pair each."""
+    track_degree = np.bincount(track, minlength=n_tracks)
+    det_degree = np.bincount(detection, minlength=n_dets)
+    return (track_degree[track] == 1) & (det_degree[detection] == 1)
+
+
 def cluster_pairs(
     track: np.ndarray, detection: np.ndarray, n_tracks: int, n_dets: int
 ) -> PairClusters:
@@ -34,9 +42,7 @@ def cluster_pairs(
     graph tracks ↔ detections."""
     if track.size == 0:
         return PairClusters(np.zeros(0, dtype=np.intp), ())
-    track_degree = np.bincount(track, minlength=n_tracks)
-    det_degree = np.bincount(detection, minlength=n_dets)
-    lone = (track_degree[track] == 1) & (det_degree[detection] == 1)
+    lone = lone_pairs(track, detection, n_tracks, n_dets)
     singles = np.flatnonzero(lone)
     rest = np.flatnonzero(~lone)
     if rest.size == 0:

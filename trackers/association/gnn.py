@@ -19,7 +19,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
-from trackers.association.clusters import cluster_pairs
+from trackers.association.clusters import cluster_pairs, lone_pairs
 
 __all__ = ["JOINT_CELLS", "gnn_assign"]
 
@@ -38,21 +38,17 @@ def gnn_assign(
     if worth.size == 0:
         return worth
     track, detection, gain = track[worth], detection[worth], gain[worth]
-    track_degree = np.bincount(track, minlength=n_tracks)
-    det_degree = np.bincount(detection, minlength=n_dets)
-    lone = (track_degree[track] == 1) & (det_degree[detection] == 1)
+    lone = lone_pairs(track, detection, n_tracks, n_dets)
     rest = np.flatnonzero(~lone)
     if rest.size == 0:
         return worth
-    n_t = np.count_nonzero(track_degree) - (lone.size - rest.size)
-    n_d = np.count_nonzero(det_degree) - (lone.size - rest.size)
     chosen = [np.flatnonzero(lone)]
-    if n_t * n_d <= JOINT_CELLS:
+    if _count_distinct(track[rest]) * _count_distinct(detection[rest]) <= JOINT_CELLS:
         groups: tuple[np.ndarray, ...] = (rest,)
-    else:
-        clusters = cluster_pairs(track[rest], detection[rest], n_tracks, n_dets)
-        chosen.append(rest[clusters.singles])
-        groups = tuple(rest[g] for g in clusters.groups)
+    else:  # removing lone pairs leaves the others' degrees as they were: no singles here
+        groups = tuple(
+            rest[g] for g in cluster_pairs(track[rest], detection[rest], n_tracks, n_dets).groups
+        )
     for pairs in groups:
         chosen.append(_solve(track[pairs], detection[pairs], gain[pairs], pairs))
     return worth[np.concatenate(chosen)]
@@ -73,6 +69,13 @@ def _solve(
     rows, cols = linear_sum_assignment(G, maximize=True)
     picked = pair_of[rows, cols]
     return picked[picked >= 0]
+
+
+def _count_distinct(index: np.ndarray) -> int:
+    """The number of distinct values in ``index`` (non-negative integers)."""
+    present = np.zeros(int(index.max()) + 1, dtype=bool)
+    present[index] = True
+    return int(np.count_nonzero(present))
 
 
 def _compact(index: np.ndarray) -> tuple[np.ndarray, int]:

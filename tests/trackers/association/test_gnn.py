@@ -70,7 +70,7 @@ def test_gnn_matches_brute_force_on_random_problems(seed, joint_cells, monkeypat
     assert total == pytest.approx(brute_force_best(track.tolist(), det.tolist(), gain.tolist()))
 
 
-def test_joint_and_per_cluster_solutions_take_the_same_gain():
+def test_joint_and_per_cluster_solutions_take_the_same_gain(monkeypatch):
     """Many small clusters of a large scene: solving them together and one by one gives the
     same summed gain, and each track and detection at most once."""
     rng = np.random.default_rng(7)
@@ -82,12 +82,8 @@ def test_joint_and_per_cluster_solutions_take_the_same_gain():
     gain = rng.normal(2.0, 2.0, track.size)
     totals = []
     for cells in (10**9, 0):
-        gnn_old = gnn.JOINT_CELLS
-        gnn.JOINT_CELLS = cells
-        try:
-            sel = gnn_assign(track, det, gain, n, n)
-        finally:
-            gnn.JOINT_CELLS = gnn_old
+        monkeypatch.setattr(gnn, "JOINT_CELLS", cells)
+        sel = gnn_assign(track, det, gain, n, n)
         assert np.unique(track[sel]).size == sel.size == np.unique(det[sel]).size
         totals.append(gain[sel].sum())
     assert totals[0] == pytest.approx(totals[1])
