@@ -13,7 +13,9 @@ from dataclasses import asdict, dataclass, field, fields, is_dataclass
 from typing import Any, get_args, get_origin, get_type_hints
 
 __all__ = [
+    "ASSOCIATION_METHODS",
     "INITIATION_METHODS",
+    "AssociationConfig",
     "GatingConfig",
     "InitiationConfig",
     "MeasurementConfig",
@@ -205,10 +207,29 @@ class TrackManagementConfig:
         return math.log(self.p_true_delete / (1 - self.p_false_confirm))
 
 
+#: The point trackers the pipeline can run (see ``trackers.pipeline.POINT_TRACKERS``).
+ASSOCIATION_METHODS = ("gnn",)
+
+
+@dataclass(frozen=True)
+class AssociationConfig:
+    """``method``: the point tracker, ``"gnn"`` (global nearest neighbour over independent
+    clusters, confirmed tracks first)."""
+
+    method: str = "gnn"
+
+    def __post_init__(self) -> None:
+        if self.method not in ASSOCIATION_METHODS:
+            raise ValueError(
+                f"association.method: one of {list(ASSOCIATION_METHODS)}, got {self.method!r}"
+            )
+
+
 @dataclass(frozen=True)
 class TrackerConfig:
-    """Everything the individual-target tracker can be told."""
+    """Everything the trackers can be told."""
 
+    association: AssociationConfig = field(default_factory=AssociationConfig)
     motion: MotionConfig = field(default_factory=MotionConfig)
     measurement: MeasurementConfig = field(default_factory=MeasurementConfig)
     initiation: InitiationConfig = field(default_factory=InitiationConfig)

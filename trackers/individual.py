@@ -22,10 +22,8 @@ One step, for a scan at time t with detections z_j (covariances R_j):
 
 from __future__ import annotations
 
-import itertools
 from collections.abc import Sequence
-from dataclasses import dataclass, replace
-from typing import TYPE_CHECKING
+from dataclasses import dataclass, fields, replace
 
 import numpy as np
 
@@ -36,12 +34,10 @@ from trackers.filters.imm import imm_combine, imm_predict, imm_update, transitio
 from trackers.initiation import MIN_PAIR_INTERVAL, Candidates, pair_candidates
 from trackers.models.measurement import H_POSITION
 from trackers.models.motion import STATE_DIM, build_models
+from trackers.peers import PointDirectives, PointProposal, PointTrackState, PointTrackView
 from trackers.rows import RowArrays, sort_within_groups
 from trackers.scoring import hit_increment, initial_score, miss_increment, sequential_test
 from trackers.types import Scan, StepResult, TrackSnapshot
-
-if TYPE_CHECKING:
-    from trackers.pipeline import ResolutionCell
 
 __all__ = ["IndividualTracker", "TrackArrays"]
 
@@ -107,39 +103,120 @@ def _objects(items: Sequence[object]) -> np.ndarray:
     return out
 
 
+@dataclass(frozen=True, eq=False)
+class _Prediction:
+    """Every track predicted to ``time`` under ``config``: the IMM mode-matched predictions
+    ``x_pred``, ``P_pred`` with mode probabilities ``c_bar``, and their combination ``xc``,
+    ``Pc``. Computed once a scan, for the peers' view and the tracker's own update."""
+
+    base: int
+    time: float
+    dt: float
+    config: TrackerConfig
+    models: tuple
+    tracks: TrackArrays
+    x_pred: np.ndarray
+    P_pred: np.ndarray
+    c_bar: np.ndarray
+    xc: np.ndarray
+    Pc: np.ndarray
+
+    def take(self, keep: np.ndarray) -> _Prediction:
+        return replace(
+            self,
+            tracks=self.tracks.take(keep),
+            x_pred=self.x_pred[keep],
+            P_pred=self.P_pred[keep],
+            c_bar=self.c_bar[keep],
+            xc=self.xc[keep],
+            Pc=self.Pc[keep],
+        )
+
+
+@dataclass(frozen=True, eq=False)
+class _State:
+    """Everything a step changes, swapped in whole by ``commit``."""
+
+    config: TrackerConfig
+    models: tuple
+    tracks: TrackArrays
+    candidates: Candidates
+    time: float | None
+    next_id: int
+    next_origin: int
+
+
+class _Counters:
+    """The id and origin counters of one proposed step (the tracker's own move on commit)."""
+
+    def __init__(self, next_id: int, next_origin: int) -> None:
+        self.next_id = next_id
+        self.next_origin = next_origin
+
+    def ids(self, n: int) -> np.ndarray:
+        out = _objects([f"T{i}" for i in range(self.next_id, self.next_id + n)])
+        self.next_id += n
+        return out
+
+    def origins(self, n: int) -> np.ndarray:
+        out = np.arange(self.next_origin, self.next_origin + n, dtype=np.int64)
+        self.next_origin += n
+        return out
+
+
 class IndividualTracker:
-    """Tracks of individual point targets; one ``step`` per scan, scans in time order."""
+    """Tracks of individual point targets (GNN association); scans in time order.
+
+    A step is ``propose`` then ``commit`` (:class:`trackers.peers.PointTracker`): a proposal
+    is computed from the tracker's state without changing it, so that the pipeline can drop
+    it when a peer fails. ``step`` does both.
+    """
+
+    kind = KIND
 
     def __init__(self, config: TrackerConfig | None = None) -> None:
-        self._config = config or TrackerConfig()
+        config = config or TrackerConfig()
+        models = build_models(config.motion)
+        self._state = _State(
+            config=config,
+            models=models,
+            tracks=_frozen(TrackArrays.empty(len(models))),
+            candidates=Candidates.empty(),
+            time=None,
+            next_id=1,
+            next_origin=0,
+        )
         self._pending: TrackerConfig | None = None
-        self._models = build_models(self._config.motion)
-        self._tracks = TrackArrays.empty(len(self._models))
-        self._candidates = Candidates.empty()
-        self._time: float | None = None
-        self._next_id = itertools.count(1)
-        self._next_origin = 0
+        self._version = 0
+        self._prediction: _Prediction | None = None
 
     # -- configuration -------------------------------------------------------------------
 
     @property
     def config(self) -> TrackerConfig:
         """The configuration in force (or to be in force from the next scan)."""
-        return self._pending or self._config
+        return self._pending or self._state.config
+
+    @property
+    def time(self) -> float | None:
+        """Time of the last committed scan, or ``None`` before the first."""
+        return self._state.time
 
     def reconfigure(self, config: TrackerConfig) -> None:
         """Use ``config`` from the next scan on. Tracks, scores and ids are kept; when the
         set of motion models changes, each track restarts its modes from its combined
         estimate with the configured initial mode probabilities."""
         self._pending = config
+        self._prediction = None
 
-    def _apply_pending(self) -> tuple[TrackerConfig, tuple, TrackArrays]:
+    def _configured(self) -> tuple[TrackerConfig, tuple, TrackArrays]:
+        st = self._state
         if self._pending is None:
-            return self._config, self._models, self._tracks
+            return st.config, st.models, st.tracks
         config = self._pending
         models = build_models(config.motion)
-        tracks = self._tracks
-        if config.motion.models != self._config.motion.models:
+        tracks = st.tracks
+        if config.motion.models != st.config.motion.models:
             M = len(models)
             mu0 = np.asarray(config.motion.initial_mode_probabilities)
             tracks = replace(
@@ -152,74 +229,142 @@ class IndividualTracker:
 
     # -- the step ------------------------------------------------------------------------
 
-    def step(self, scan: Scan, cells: Sequence[ResolutionCell] = ()) -> StepResult:
-        """Process one scan (already checked by the pipeline) and return every live track."""
-        config, models, tracks = self._apply_pending()
-        tm = config.track_management
+    def _predict(self, time: float) -> _Prediction:
+        """Every track predicted to ``time`` (cached for the state and time)."""
+        cached = self._prediction
+        if cached is not None and cached.base == self._version and cached.time == time:
+            return cached
+        last = self._state.time
+        if last is not None and time < last:
+            raise ValueError(f"time {time} is older than the last processed time {last}")
+        config, models, tracks = self._configured()
+        dt = 0.0 if last is None else time - last
+        if len(tracks):
+            Pi = transition_matrix(config.motion.sojourn_times, dt)
+            x_pred, P_pred, c_bar = imm_predict(models, tracks.x, tracks.P, tracks.mu, Pi, dt)
+            xc, Pc = imm_combine(x_pred, P_pred, c_bar)
+        else:
+            x_pred, P_pred, c_bar = tracks.x, tracks.P, tracks.mu
+            xc, Pc = tracks.x_comb, tracks.P_comb
+        pred = _Prediction(
+            self._version, time, dt, config, models, tracks, x_pred, P_pred, c_bar, xc, Pc
+        )
+        self._prediction = pred
+        return pred
+
+    def predicted(self, time: float) -> PointTrackView:
+        """The live tracks predicted to ``time`` (no earlier than the last scan), read-only."""
+        pred = self._predict(float(time))
+        tr = pred.tracks
+        return PointTrackView(
+            time=float(time),
+            ids=tuple(tr.ids.tolist()),
+            x=pred.xc,
+            P=pred.Pc,
+            score=tr.score,
+            hits=tr.hits,
+            confirmed=tr.confirmed,
+            created=tr.created,
+            updated=tr.updated,
+        )
+
+    def step(self, scan: Scan, directives: PointDirectives | None = None) -> StepResult:
+        """Process one scan (already checked by the pipeline): propose, then commit."""
+        proposal = self.propose(scan, directives)
+        self.commit(proposal)
+        return proposal.result
+
+    def commit(self, proposal: PointProposal) -> None:
+        """Make ``proposal`` the tracker's state; refused when the tracker has moved on since
+        it was proposed."""
+        base, state = proposal.state
+        if base != self._version:
+            raise ValueError("a stale proposal: the tracker has committed another step since")
+        self._state = state
+        self._pending = None
+        self._version += 1
+        self._prediction = None
+
+    def propose(self, scan: Scan, directives: PointDirectives | None = None) -> PointProposal:
+        """The step for ``scan`` under the peers' ``directives``, without changing the tracker."""
+        directives = directives or PointDirectives()
         t = float(scan.time)
-        dt = 0.0 if self._time is None else t - self._time
+        pred = self._predict(t)
+        config, models = pred.config, pred.models
+        tm = config.track_management
         pd_sensor = tm.pd if scan.pd is None else float(scan.pd)
         lam_fa = tm.clutter_density if scan.clutter_density is None else float(scan.clutter_density)
+        counters = _Counters(self._state.next_id, self._state.next_origin)
 
+        released: tuple[PointTrackState, ...] = ()
+        if directives.release:
+            ids = pred.tracks.ids
+            out = np.isin(ids, np.array(sorted(directives.release), dtype=object))
+            released = tuple(_state_of(pred, i, t) for i in np.flatnonzero(out).tolist())
+            pred = pred.take(~out)
+
+        tracks = pred.tracks
         claims = np.full(scan.size, -np.inf)
         if len(tracks):
-            tracks, claims = self._update_existing(
-                tracks, models, config, scan, dt, pd_sensor, lam_fa, cells
-            )
+            pd = np.full(len(tracks), pd_sensor)
+            if directives.pd:
+                for i, tid in enumerate(tracks.ids.tolist()):
+                    p = directives.pd.get(tid)
+                    if p is not None:
+                        pd[i] = p
+            tracks, claims = self._update_existing(pred, scan, pd, lam_fa)
             tracks = tracks.take(_best_of_each_origin(tracks))
 
         if config.initiation.method == "two_point":
-            born, candidates = self._initiate_two_point(scan, claims, config, pd_sensor, lam_fa)
+            born, candidates = self._initiate_two_point(
+                scan, claims, config, pd_sensor, lam_fa, counters
+            )
         else:
-            born = self._initiate(scan, claims == -np.inf, config, lam_fa)
+            born = self._initiate(scan, claims == -np.inf, config, lam_fa, counters)
             candidates = Candidates.empty()
         n_old = len(tracks)
         tracks = tracks.concat(born)
+        if directives.adopt:
+            tracks = tracks.concat(_adopted(directives.adopt, config, counters))
 
         status = sequential_test(
             tracks.score, tracks.peak, tracks.confirmed, t - tracks.updated, tm
         )
         delete = status.delete
-        delete[n_old:] = False  # a track is never deleted in the scan that starts it
+        delete[n_old:] = False  # a track is never deleted in the scan that starts or adopts it
         deleted_ids = tuple(tracks.ids[delete & tracks.confirmed].tolist())
         tracks = replace(tracks, confirmed=status.confirmed | (tracks.confirmed & ~delete))
-        tracks = tracks.take(~delete)
+        tracks = _frozen(tracks.take(~delete))
 
-        # Commit: nothing above touched self.
-        self._config, self._models, self._pending = config, models, None
-        self._tracks = tracks
-        self._candidates = candidates
-        self._time = t
-        state = (tracks, tuple(m.name for m in models), t)
-        return StepResult(
+        state = _State(
+            config=config,
+            models=models,
+            tracks=tracks,
+            candidates=candidates,
+            time=t,
+            next_id=counters.next_id,
+            next_origin=counters.next_origin,
+        )
+        names = tuple(m.name for m in models)
+        result = StepResult(
             time=t,
             sensor_id=scan.sensor_id,
             deleted=deleted_ids,
-            snapshot=lambda confirmed_only: _snapshots(*state, confirmed_only=confirmed_only),
+            snapshot=lambda confirmed_only: _snapshots(
+                tracks, names, t, confirmed_only=confirmed_only
+            ),
         )
+        return PointProposal(result=result, released=released, state=(self._version, state))
 
     def _update_existing(
-        self,
-        tracks: TrackArrays,
-        models: tuple,
-        config: TrackerConfig,
-        scan: Scan,
-        dt: float,
-        pd_sensor: float,
-        lam_fa: float,
-        cells: Sequence[ResolutionCell],
+        self, pred: _Prediction, scan: Scan, pd: np.ndarray, lam_fa: float
     ) -> tuple[TrackArrays, np.ndarray]:
-        """The tracks updated with this scan, and each detection's *claim*: ``+inf`` where a
-        confirmed track took it or has it in its gate, the updated score of the tentative
-        track that took it, ``−inf`` where it is free."""
-        Pi = transition_matrix(config.motion.sojourn_times, dt)
-        x_pred, P_pred, c_bar = imm_predict(models, tracks.x, tracks.P, tracks.mu, Pi, dt)
-        xc, Pc = imm_combine(x_pred, P_pred, c_bar)
-
-        pd = np.full(len(tracks), pd_sensor)
-        for cell in cells:
-            pd[cell.contains(xc[:, :2])] = cell.pd
-
+        """The tracks updated with this scan (``pd`` the detection probability of each), and
+        each detection's *claim*: ``+inf`` where a confirmed track took it or has it in its
+        gate, the updated score of the tentative track that took it, ``−inf`` where it is
+        free."""
+        config, tracks = pred.config, pred.tracks
+        x_pred, P_pred, c_bar, xc, Pc = pred.x_pred, pred.P_pred, pred.c_bar, pred.xc, pred.Pc
         pairs = gate(xc[:, :2], Pc[:, :2, :2], scan.z, scan.R, config.gating.threshold)
         ti, dj = pairs.track, pairs.detection
         # The mode-matched update of every gated pair gives its likelihood g_ij for the
@@ -279,7 +424,13 @@ class IndividualTracker:
         return new, claims
 
     def _initiate_two_point(
-        self, scan: Scan, claims: np.ndarray, config: TrackerConfig, pd: float, lam_fa: float
+        self,
+        scan: Scan,
+        claims: np.ndarray,
+        config: TrackerConfig,
+        pd: float,
+        lam_fa: float,
+        counters: _Counters,
     ) -> tuple[TrackArrays, Candidates]:
         """Velocity-gated two-point initiation (:mod:`trackers.initiation`).
 
@@ -291,7 +442,7 @@ class IndividualTracker:
         detection becomes a candidate. Returns the new tracks and the candidates to keep."""
         init, tm = config.initiation, config.track_management
         t = float(scan.time)
-        cand = self._candidates
+        cand = self._state.candidates
         cand = cand.take(t - cand.time <= init.candidate_max_age)
         two = pair_candidates(
             cand,
@@ -309,9 +460,10 @@ class IndividualTracker:
             clutter_density=lam_fa,
             min_score=np.maximum(claims, tm.delete_threshold),
         )
-        born = self._new_tracks(
+        born = _new_tracks(
             config,
             scan,
+            counters,
             two.detection,
             two.x,
             two.P,
@@ -335,64 +487,17 @@ class IndividualTracker:
                 [score[keep], np.full(n, initial_score(tm.new_target_density, lam_fa))]
             ),
             detection_ids=np.concatenate([cand.detection_ids[keep], fresh_ids]),
-            origin=np.concatenate(
-                [cand.origin[keep], np.arange(self._next_origin, self._next_origin + n)]
-            ),
+            origin=np.concatenate([cand.origin[keep], counters.origins(n)]),
         )
-        self._next_origin += n
         return born, candidates
 
-    def _new_tracks(
-        self,
-        config: TrackerConfig,
-        scan: Scan,
-        detections: np.ndarray,
-        x: np.ndarray,
-        P: np.ndarray,
-        *,
-        score: np.ndarray,
-        hits: int,
-        created: np.ndarray,
-        origin: np.ndarray,
-    ) -> TrackArrays:
-        """Tentative tracks at this scan from states ``x (n, 4)`` over ``[x, y, vx, vy]``
-        with covariances ``P (n, 4, 4)``, each mode starting from that state with turn rate 0
-        of std ``turn_rate_std``; ``detections`` index the scan's detections they hold."""
-        M = len(config.motion.models)
-        n = detections.size
-        if n == 0:
-            return TrackArrays.empty(M)
-        x0 = np.zeros((n, STATE_DIM))
-        x0[:, :4] = x
-        P0 = np.zeros((n, STATE_DIM, STATE_DIM))
-        P0[:, :4, :4] = P
-        P0[:, 4, 4] = config.initiation.turn_rate_std**2
-        ids = _objects([f"T{next(self._next_id)}" for _ in range(n)])
-        det_ids = _objects(
-            [
-                () if scan.detection_ids[j] is None else (scan.detection_ids[j],)
-                for j in detections.tolist()
-            ]
-        )
-        return TrackArrays(
-            ids=ids,
-            x=np.repeat(x0[:, None, :], M, axis=1),
-            P=np.repeat(P0[:, None, :, :], M, axis=1),
-            mu=np.tile(np.asarray(config.motion.initial_mode_probabilities), (n, 1)),
-            x_comb=x0,
-            P_comb=P0,
-            score=np.asarray(score, dtype=float),
-            peak=np.array(score, dtype=float),
-            confirmed=np.zeros(n, dtype=bool),
-            hits=np.full(n, hits, dtype=np.int64),
-            created=np.asarray(created, dtype=float),
-            updated=np.full(n, float(scan.time)),
-            detection_ids=det_ids,
-            origin=np.asarray(origin, dtype=np.int64),
-        )
-
     def _initiate(
-        self, scan: Scan, free: np.ndarray, config: TrackerConfig, lam_fa: float
+        self,
+        scan: Scan,
+        free: np.ndarray,
+        config: TrackerConfig,
+        lam_fa: float,
+        counters: _Counters,
     ) -> TrackArrays:
         """A tentative track at each free detection: position z with covariance R, zero
         velocity and turn rate with the configured standard deviations."""
@@ -404,18 +509,17 @@ class IndividualTracker:
         P[:, :2, :2] = scan.R[idx]
         P[:, 2, 2] = P[:, 3, 3] = config.initiation.velocity_std**2
         L1 = initial_score(config.track_management.new_target_density, lam_fa)
-        origin = np.arange(self._next_origin, self._next_origin + n, dtype=np.int64)
-        self._next_origin += n
-        return self._new_tracks(
+        return _new_tracks(
             config,
             scan,
+            counters,
             idx,
             x,
             P,
             score=np.full(n, L1),
             hits=1,
             created=np.full(n, float(scan.time)),
-            origin=origin,
+            origin=counters.origins(n),
         )
 
     # -- output --------------------------------------------------------------------------
@@ -423,13 +527,120 @@ class IndividualTracker:
     @property
     def tracks(self) -> TrackArrays:
         """The live tracks as arrays (read-only by convention)."""
-        return self._tracks
+        return self._state.tracks
+
+    @property
+    def candidates(self) -> Candidates:
+        """The two-point candidates waiting for a second detection (read-only by convention)."""
+        return self._state.candidates
 
     def snapshot(self, confirmed_only: bool = False) -> tuple[TrackSnapshot, ...]:
         """Every live track (or only the confirmed ones) as immutable snapshots."""
-        names = tuple(m.name for m in self._models)
-        t = self._time if self._time is not None else 0.0
-        return _snapshots(self._tracks, names, t, confirmed_only=confirmed_only)
+        st = self._state
+        names = tuple(m.name for m in st.models)
+        t = st.time if st.time is not None else 0.0
+        return _snapshots(st.tracks, names, t, confirmed_only=confirmed_only)
+
+
+def _new_tracks(
+    config: TrackerConfig,
+    scan: Scan,
+    counters: _Counters,
+    detections: np.ndarray,
+    x: np.ndarray,
+    P: np.ndarray,
+    *,
+    score: np.ndarray,
+    hits: int,
+    created: np.ndarray,
+    origin: np.ndarray,
+) -> TrackArrays:
+    """Tentative tracks at this scan from states ``x (n, 4)`` over ``[x, y, vx, vy]``
+    with covariances ``P (n, 4, 4)``, each mode starting from that state with turn rate 0
+    of std ``turn_rate_std``; ``detections`` index the scan's detections they hold."""
+    M = len(config.motion.models)
+    n = detections.size
+    if n == 0:
+        return TrackArrays.empty(M)
+    x0 = np.zeros((n, STATE_DIM))
+    x0[:, :4] = x
+    P0 = np.zeros((n, STATE_DIM, STATE_DIM))
+    P0[:, :4, :4] = P
+    P0[:, 4, 4] = config.initiation.turn_rate_std**2
+    ids = counters.ids(n)
+    det_ids = _objects(
+        [
+            () if scan.detection_ids[j] is None else (scan.detection_ids[j],)
+            for j in detections.tolist()
+        ]
+    )
+    return TrackArrays(
+        ids=ids,
+        x=np.repeat(x0[:, None, :], M, axis=1),
+        P=np.repeat(P0[:, None, :, :], M, axis=1),
+        mu=np.tile(np.asarray(config.motion.initial_mode_probabilities), (n, 1)),
+        x_comb=x0,
+        P_comb=P0,
+        score=np.asarray(score, dtype=float),
+        peak=np.array(score, dtype=float),
+        confirmed=np.zeros(n, dtype=bool),
+        hits=np.full(n, hits, dtype=np.int64),
+        created=np.asarray(created, dtype=float),
+        updated=np.full(n, float(scan.time)),
+        detection_ids=det_ids,
+        origin=np.asarray(origin, dtype=np.int64),
+    )
+
+
+def _frozen(tracks: TrackArrays) -> TrackArrays:
+    """``tracks`` with every array read-only: what the tracker keeps between scans cannot be
+    changed through anything it hands out."""
+    for f in fields(tracks):
+        getattr(tracks, f.name).flags.writeable = False
+    return tracks
+
+
+def _state_of(pred: _Prediction, i: int, t: float) -> PointTrackState:
+    """Track ``i`` of a prediction as a hand-over record (its combined estimate at ``t``)."""
+    tr = pred.tracks
+    return PointTrackState(
+        id=str(tr.ids[i]),
+        time=t,
+        x=pred.xc[i],
+        P=pred.Pc[i],
+        score=float(tr.score[i]),
+        hits=int(tr.hits[i]),
+        confirmed=bool(tr.confirmed[i]),
+        created=float(tr.created[i]),
+        updated=float(tr.updated[i]),
+    )
+
+
+def _adopted(
+    states: Sequence[PointTrackState], config: TrackerConfig, counters: _Counters
+) -> TrackArrays:
+    """Tracks handed back by a peer, under their own ids: every IMM mode starts from the
+    handed state with the configured initial mode probabilities; each is its own origin."""
+    n, M = len(states), len(config.motion.models)
+    x = np.array([st.x for st in states], dtype=float).reshape(n, STATE_DIM)
+    P = np.array([st.P for st in states], dtype=float).reshape(n, STATE_DIM, STATE_DIM)
+    score = np.array([st.score for st in states], dtype=float)
+    return TrackArrays(
+        ids=_objects([st.id for st in states]),
+        x=np.repeat(x[:, None, :], M, axis=1),
+        P=np.repeat(P[:, None, :, :], M, axis=1),
+        mu=np.tile(np.asarray(config.motion.initial_mode_probabilities), (n, 1)),
+        x_comb=x,
+        P_comb=P,
+        score=score,
+        peak=score.copy(),
+        confirmed=np.array([st.confirmed for st in states], dtype=bool),
+        hits=np.array([st.hits for st in states], dtype=np.int64),
+        created=np.array([st.created for st in states], dtype=float),
+        updated=np.array([st.updated for st in states], dtype=float),
+        detection_ids=_objects([()] * n),
+        origin=counters.origins(n),
+    )
 
 
 def _missed_branch(time: np.ndarray, score: np.ndarray, t: float, miss: float) -> np.ndarray:
@@ -458,7 +669,8 @@ def _snapshots(
         return ()
     pos = tr.x_comb[:, :2].tolist()
     vel = tr.x_comb[:, 2:4].tolist()
-    cov = tr.P_comb[:, :4, :4]
+    cov = tr.P_comb[:, :4, :4].copy()
+    cov.flags.writeable = False  # a snapshot cannot change the tracker, nor another snapshot
     status = np.where(tr.confirmed, "confirmed", "tentative").tolist()
     return tuple(
         TrackSnapshot(

@@ -1,39 +1,43 @@
 """One tracking step over all track kinds.
 
-The pipeline checks a scan once, then lets its *peer* trackers (extended objects, formations,
-point patterns: anything that takes many detections a scan) go first. Each peer may
+The pipeline checks a scan once, then runs its trackers in two phases (see
+:mod:`trackers.peers`): every *peer* (extended objects, formations, point patterns) proposes
+what it would do with the scan, seeing the point tracks predicted to the scan's time; the
+*point tracker* proposes its step on the detections no peer claimed, under what the peers
+asked of it (detection probabilities, tracks taken over and handed back); only then does each
+commit. A rejected scan raises :class:`~trackers.types.ScanRejected`, and a failing or
+ill-formed peer :class:`~trackers.peers.PeerError`, before any tracker has changed.
 
-- claim detections: a claimed detection is explained by the peer and never starts or updates
-  an individual track;
-- declare resolution cells: ellipses inside which an individual target cannot be resolved
-  from the peer's object, where individual tracks are scored with the cell's detection
-  probability instead of the sensor's (paper 002, section III.C, the hybridization).
-
-The individual-target tracker then runs on the unclaimed detections. A rejected scan raises
-:class:`~trackers.types.ScanRejected` before any tracker has changed.
+The point tracker is chosen by ``association.method`` (:data:`POINT_TRACKERS`) or injected.
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
-from dataclasses import dataclass, field
-from typing import Protocol
+from collections.abc import Callable, Sequence
 
 import numpy as np
 
 from trackers.config import TrackerConfig
 from trackers.individual import IndividualTracker
+from trackers.peers import (
+    PeerError,
+    PeerProposal,
+    PeerTracker,
+    PointDirectives,
+    PointTracker,
+    check_proposal,
+    combine_directives,
+)
 from trackers.types import Scan, ScanRejected, StepResult, TrackSnapshot
 
 __all__ = [
     "MAX_ABS_POSITION",
     "MAX_VARIANCE",
-    "PeerOutput",
-    "PeerTracker",
-    "ResolutionCell",
+    "POINT_TRACKERS",
     "TrackingPipeline",
     "check_scan",
+    "make_point_tracker",
 ]
 
 #: Largest |x| or |y| a detection may have (m): far beyond any sensor of a local frame, and
@@ -43,43 +47,13 @@ MAX_ABS_POSITION = 1e9
 MAX_VARIANCE = 1e14
 
 
-@dataclass(frozen=True)
-class ResolutionCell:
-    """The ellipse ``(p − c)ᵀ M⁻¹ (p − c) ≤ 1`` inside which individual targets are detected
-    with probability ``pd`` (often much lower than the sensor's: the peer's object masks them)."""
-
-    center: np.ndarray
-    matrix: np.ndarray
-    pd: float
-
-    def contains(self, points: np.ndarray) -> np.ndarray:
-        """Boolean mask of the ``(n, 2)`` points inside the cell."""
-        d = np.asarray(points, dtype=float).reshape(-1, 2) - self.center
-        return np.einsum("ni,ij,nj->n", d, np.linalg.inv(self.matrix), d) <= 1.0
+#: The point trackers by ``association.method``.
+POINT_TRACKERS: dict[str, Callable[[TrackerConfig], PointTracker]] = {"gnn": IndividualTracker}
 
 
-@dataclass(frozen=True)
-class PeerOutput:
-    """What a peer tracker returns for one scan."""
-
-    claimed: np.ndarray
-    tracks: tuple[TrackSnapshot, ...] = ()
-    deleted: tuple[str, ...] = ()
-    cells: tuple[ResolutionCell, ...] = field(default_factory=tuple)
-
-
-class PeerTracker(Protocol):
-    """A tracker of another kind that runs before the individual tracker on each scan.
-
-    ``step`` sees the scan and the individual tracks as they were before it, and must leave
-    its own state unchanged when it raises.
-    """
-
-    kind: str
-
-    def step(self, scan: Scan, individual: tuple[TrackSnapshot, ...]) -> PeerOutput: ...
-
-    def snapshot(self) -> tuple[TrackSnapshot, ...]: ...
+def make_point_tracker(config: TrackerConfig) -> PointTracker:
+    """The point tracker that ``config.association.method`` names."""
+    return POINT_TRACKERS[config.association.method](config)
 
 
 def check_scan(scan: Scan, last_time: float | None) -> None:
@@ -131,18 +105,30 @@ def check_scan(scan: Scan, last_time: float | None) -> None:
 
 
 class TrackingPipeline:
-    """Peers first, then individual tracks; one ``process`` call per scan, in time order."""
+    """Peers and the point tracker; one ``process`` call per scan, in time order."""
 
     def __init__(
-        self, config: TrackerConfig | None = None, peers: Sequence[PeerTracker] = ()
+        self,
+        config: TrackerConfig | None = None,
+        peers: Sequence[PeerTracker] = (),
+        point_tracker: PointTracker | None = None,
     ) -> None:
-        self.individual = IndividualTracker(config or TrackerConfig())
+        config = config or TrackerConfig()
+        self.point: PointTracker = point_tracker or make_point_tracker(config)
         self.peers: tuple[PeerTracker, ...] = tuple(peers)
+        kinds = [p.kind for p in self.peers]
+        if len(set(kinds)) != len(kinds):
+            raise ValueError(f"two peers of one kind: {kinds}")
         self._last_time: float | None = None
 
     @property
+    def individual(self) -> PointTracker:
+        """The point tracker (the individual-target tracks)."""
+        return self.point
+
+    @property
     def config(self) -> TrackerConfig:
-        return self.individual.config
+        return self.point.config
 
     @property
     def last_time(self) -> float | None:
@@ -150,32 +136,50 @@ class TrackingPipeline:
         return self._last_time
 
     def reconfigure(self, config: TrackerConfig) -> None:
-        """Use ``config`` from the next scan on; tracks and ids are kept."""
-        self.individual.reconfigure(config)
+        """Use ``config`` from the next scan on, in every tracker; tracks and ids are kept."""
+        self.point.reconfigure(config)
+        for peer in self.peers:
+            peer.reconfigure(config)
 
     def process(self, scan: Scan) -> StepResult:
-        """Run one scan through every tracker; raise ``ScanRejected`` and change nothing when
-        the scan is unusable."""
+        """Run one scan through every tracker. Raise ``ScanRejected`` for an unusable scan and
+        ``PeerError`` for a failing peer; either way no tracker changes."""
         check_scan(scan, self._last_time)
-        before = self.individual.snapshot() if self.peers else ()
-        claimed = np.zeros(scan.size, dtype=bool)
-        cells: list[ResolutionCell] = []
-        peer_tracks: list[TrackSnapshot] = []
-        deleted: list[str] = []
+        if not self.peers:
+            proposal = self.point.propose(scan, PointDirectives())
+            self.point.commit(proposal)
+            self._last_time = scan.time
+            return proposal.result
+        view = self.point.predicted(scan.time)
+        proposals: list[PeerProposal] = []
         for peer in self.peers:
-            out = peer.step(scan, before)
-            claimed |= np.asarray(out.claimed, dtype=bool)
-            cells.extend(out.cells)
-            peer_tracks.extend(out.tracks)
-            deleted.extend(out.deleted)
-        result = self.individual.step(scan.subset(~claimed), cells=tuple(cells))
+            try:
+                prop = peer.propose(scan, view)
+            except ScanRejected:
+                raise
+            except Exception as exc:
+                raise PeerError(peer.kind, f"{type(exc).__name__}: {exc}") from exc
+            check_proposal(peer.kind, prop, scan, view)
+            proposals.append(prop)
+        kinds = tuple(p.kind for p in self.peers)
+        directives = combine_directives(kinds, tuple(proposals), view)
+        claimed = np.zeros(scan.size, dtype=bool)
+        for prop in proposals:
+            claimed |= prop.claimed
+        point = self.point.propose(scan.subset(~claimed), directives)
+        # Commit: every tracker has proposed without error.
+        for peer, prop in zip(self.peers, proposals, strict=True):
+            peer.commit(prop)
+        self.point.commit(point)
         self._last_time = scan.time
-        peer_all = tuple(peer_tracks)
+        peer_all = tuple(t for prop in proposals for t in prop.tracks)
         peer_confirmed = tuple(t for t in peer_all if t.confirmed)
+        deleted = tuple(d for prop in proposals for d in prop.deleted)
+        result = point.result
         return StepResult(
             time=scan.time,
             sensor_id=scan.sensor_id,
-            deleted=tuple(deleted) + result.deleted,
+            deleted=deleted + result.deleted,
             snapshot=lambda confirmed_only: (
                 (peer_confirmed if confirmed_only else peer_all) + result.snapshot(confirmed_only)
             ),
@@ -186,5 +190,5 @@ class TrackingPipeline:
         out: list[TrackSnapshot] = []
         for peer in self.peers:
             out.extend(peer.snapshot())
-        out.extend(self.individual.snapshot())
+        out.extend(self.point.snapshot())
         return tuple(out)

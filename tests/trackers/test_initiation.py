@@ -108,7 +108,7 @@ def test_a_lone_false_alarm_starts_nothing():
     for k in range(1, 6):
         res = tr.step(scan_at(2.0 * k, np.zeros((0, 2))))
         assert res.tracks == ()
-    assert len(tr._candidates) == 0  # dropped by its score or its age
+    assert len(tr.candidates) == 0  # dropped by its score or its age
 
 
 def test_single_point_method_cannot_start_a_fast_target():
@@ -144,7 +144,7 @@ def test_tracker_keeps_new_tracks_bounded_in_dense_clutter():
     n = 500
     for k in range(10):
         res = tr.step(scan_at(k, rng.uniform(-5000, 5000, (n, 2)), sigma=10.0, lam=n / 1e8))
-        assert len(tr._candidates) <= 3 * n
+        assert len(tr.candidates) <= 3 * n
         assert len(res.tracks) <= 3 * n
     assert res.confirmed() == ()
 

@@ -1,12 +1,14 @@
 """The tracking step over peers and individual tracks, and its refusal of bad scans."""
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
 
 from trackers.config import TrackerConfig
-from trackers.pipeline import PeerOutput, ResolutionCell, TrackingPipeline, check_scan
+from trackers.peers import PeerError, PeerProposal, ResolutionCell
+from trackers.pipeline import TrackingPipeline, check_scan
 from trackers.types import Scan, ScanRejected
 
 #: Tracks that start at one detection, so that one scan makes a track to look at.
@@ -20,26 +22,49 @@ def scan_at(t, points, R=None, **kw):
     return Scan("r1", float(t), z, R, **kw)
 
 
-class DiscClaimer:
-    """A peer that explains every detection within ``radius`` of ``center`` as its own and
-    masks individual targets there (detection probability ``pd_inside``)."""
+class ScriptedPeer:
+    """A peer whose proposal for each scan comes from ``plan(scan, view)``; its state is the
+    number of scans it has committed, and it records the views it was shown."""
 
-    kind = "extended"
+    def __init__(self, kind, plan):
+        self.kind = kind
+        self.plan = plan
+        self.committed = 0
+        self.views = []
+        self.config = None
 
-    def __init__(self, center, radius, pd_inside):
-        self.center = np.asarray(center, dtype=float)
-        self.radius = radius
-        self.pd_inside = pd_inside
-        self.seen_individual = []
+    def propose(self, scan, view):
+        self.views.append(view)
+        return self.plan(scan, view)
 
-    def step(self, scan, individual):
-        self.seen_individual.append(len(individual))
-        inside = np.linalg.norm(scan.z - self.center, axis=1) <= self.radius
-        cell = ResolutionCell(self.center, self.radius**2 * np.eye(2), self.pd_inside)
-        return PeerOutput(claimed=inside, cells=(cell,))
+    def commit(self, proposal):
+        self.committed += 1
 
     def snapshot(self):
         return ()
+
+    def reconfigure(self, config):
+        self.config = config
+
+
+def nothing(scan, view):
+    return PeerProposal(claimed=np.zeros(scan.size, dtype=bool))
+
+
+class DiscClaimer(ScriptedPeer):
+    """A peer that explains every detection within ``radius`` of ``center`` as its own and
+    masks individual targets there (detection probability ``pd_inside``)."""
+
+    def __init__(self, center, radius, pd_inside):
+        super().__init__("extended", self._plan)
+        self.center = np.asarray(center, dtype=float)
+        self.radius = radius
+        self.pd_inside = pd_inside
+
+    def _plan(self, scan, view):
+        inside = np.linalg.norm(scan.z - self.center, axis=1) <= self.radius
+        cell = ResolutionCell(self.center, self.radius**2 * np.eye(2), self.pd_inside)
+        return PeerProposal(claimed=inside, cells=(cell,))
 
 
 def state(p):
@@ -98,7 +123,7 @@ def test_resolution_cell_changes_individual_detection_probability_and_score():
     plain = TrackingPipeline(cfg)
     hybrid = TrackingPipeline(cfg, peers=[DiscClaimer(center=[0, 0], radius=50.0, pd_inside=0.2)])
     for p in (plain, hybrid):
-        p.individual.step(scan_at(0.0, [0, 0]))
+        p.point.step(scan_at(0.0, [0, 0]))
     s0 = plain.snapshot()[0].score
     plain.process(scan_at(1.0, np.zeros((0, 2))))
     hybrid.process(scan_at(1.0, np.zeros((0, 2))))
@@ -106,9 +131,179 @@ def test_resolution_cell_changes_individual_detection_probability_and_score():
     assert hybrid.snapshot()[0].score == pytest.approx(s0 + math.log(1 - 0.2))
 
 
-def test_peer_sees_individual_tracks_before_the_scan():
-    peer = DiscClaimer(center=[1e6, 1e6], radius=1.0, pd_inside=0.5)
+def test_peer_sees_individual_tracks_predicted_to_the_scan_time_read_only():
+    peer = ScriptedPeer("formation", nothing)
     p = TrackingPipeline(SINGLE_POINT, peers=[peer])
-    p.process(scan_at(0.0, [[0, 0], [100, 0]]))
-    p.process(scan_at(1.0, [[0, 0], [100, 0]]))
-    assert peer.seen_individual == [0, 2]
+    p.point.step(scan_at(0.0, [0, 0]))
+    p.point.step(scan_at(1.0, [10, 0]))  # a track moving at about 10 m/s along x
+    x1 = p.snapshot()[0].position[0]
+    vx = p.snapshot()[0].velocity[0]
+    p.process(scan_at(3.0, np.zeros((0, 2))))
+    view = peer.views[-1]
+    assert view.time == 3.0 and len(view) == 1
+    assert view.x[0, 0] == pytest.approx(x1 + 2.0 * vx)
+    assert view.x.shape == (1, 5) and view.P.shape == (1, 5, 5)
+    with pytest.raises(ValueError):
+        view.x[0, 0] = 0.0
+    with pytest.raises(ValueError):
+        view.P[0, 0, 0] = 0.0
+
+
+def test_a_failing_second_peer_changes_no_tracker():
+    first = ScriptedPeer("extended", nothing)
+
+    def fail(scan, view):
+        raise RuntimeError("template lost")
+
+    p = TrackingPipeline(SINGLE_POINT, peers=[first, ScriptedPeer("formation", fail)])
+    p.point.step(scan_at(0.0, [[0, 0], [100, 100]]))
+    before = state(p)
+    with pytest.raises(PeerError) as err:
+        p.process(scan_at(1.0, [[1, 0], [101, 100], [500, 500]]))
+    assert err.value.kind == "formation"
+    assert "template lost" in str(err.value)
+    assert first.committed == 0
+    assert state(p) == before
+    assert p.last_time is None
+    # The point tracker has not moved on either: a scan at the same time still goes through.
+    p.peers[1].plan = nothing
+    p.process(scan_at(1.0, [[1, 0], [101, 100], [500, 500]]))
+    assert first.committed == 1
+    assert len(p.snapshot()) == 3
+
+
+@pytest.mark.parametrize(
+    ("proposal", "text"),
+    [
+        (lambda s, v: PeerProposal(claimed=np.zeros(s.size + 1, dtype=bool)), "claimed"),
+        (lambda s, v: PeerProposal(claimed=np.zeros(s.size)), "boolean mask"),
+        (lambda s, v: {"claimed": np.zeros(s.size, dtype=bool)}, "not a PeerProposal"),
+        (lambda s, v: PeerProposal(np.zeros(s.size, dtype=bool), pd={"T999": 0.5}), "T999"),
+        (lambda s, v: PeerProposal(np.zeros(s.size, dtype=bool), pd={v.ids[0]: 1.5}), "(0, 1]"),
+        (lambda s, v: PeerProposal(np.zeros(s.size, dtype=bool), take=("T999",)), "take"),
+        (
+            lambda s, v: PeerProposal(np.zeros(s.size, dtype=bool), hand_back=(v.state(0),)),
+            "already a live",
+        ),
+    ],
+)
+def test_an_ill_formed_proposal_is_an_error_naming_the_peer_and_changes_nothing(proposal, text):
+    p = TrackingPipeline(SINGLE_POINT, peers=[ScriptedPeer("extended", proposal)])
+    p.point.step(scan_at(0.0, [[0, 0], [100, 100]]))
+    before = state(p)
+    with pytest.raises(PeerError) as err:
+        p.process(scan_at(1.0, [[1, 0], [101, 100]]))
+    assert "peer 'extended'" in str(err.value) and text in str(err.value)
+    assert state(p) == before
+
+
+def test_a_peer_sets_the_detection_probability_of_a_named_track():
+    cfg = SINGLE_POINT.merged({"track_management": {"pd": 0.9}})
+
+    def lower_t1(scan, view):
+        return PeerProposal(claimed=np.zeros(scan.size, dtype=bool), pd={"T1": 0.3})
+
+    p = TrackingPipeline(cfg, peers=[ScriptedPeer("extended", lower_t1)])
+    p.point.step(scan_at(0.0, [[0, 0], [1000, 0]]))
+    s0 = {t.id: t.score for t in p.snapshot()}
+    p.process(scan_at(1.0, np.zeros((0, 2))))
+    s1 = {t.id: t.score for t in p.snapshot()}
+    assert s1["T1"] == pytest.approx(s0["T1"] + math.log(1 - 0.3))
+    assert s1["T2"] == pytest.approx(s0["T2"] + math.log(1 - 0.9))
+
+
+def test_where_requests_meet_the_lowest_detection_probability_holds():
+    cfg = SINGLE_POINT.merged({"track_management": {"pd": 0.9}})
+    a = DiscClaimer(center=[0, 0], radius=50.0, pd_inside=0.5)
+
+    def named(scan, view):
+        return PeerProposal(claimed=np.zeros(scan.size, dtype=bool), pd={"T1": 0.7})
+
+    p = TrackingPipeline(cfg, peers=[a, ScriptedPeer("formation", named)])
+    p.point.step(scan_at(0.0, [0, 0]))
+    s0 = p.snapshot()[0].score
+    p.process(scan_at(1.0, np.zeros((0, 2))))
+    assert p.snapshot()[0].score == pytest.approx(s0 + math.log(1 - 0.5))
+
+
+class Holder(ScriptedPeer):
+    """Takes over track ``tid`` when it first sees it, claims the detections within 50 m of
+    it while it holds it (as a formation claims its members'), and hands it back, with its
+    hits counting those detections, at the first scan at or after ``back_at``."""
+
+    def __init__(self, tid, back_at):
+        super().__init__("formation", self._plan)
+        self.tid, self.back_at = tid, back_at
+        self.held = None
+
+    def _plan(self, scan, view):
+        if self.held == "done":
+            return nothing(scan, view)
+        if self.held is None:
+            if self.tid not in view.ids:
+                return nothing(scan, view)
+            held, take = view.state(view.index()[self.tid]), (self.tid,)
+        else:
+            held, take = self.held, ()
+        near = np.linalg.norm(scan.z - held.x[:2], axis=1) <= 50.0
+        if near.any():
+            held = replace(held, hits=held.hits + 1, updated=scan.time)
+        held = replace(held, time=scan.time)
+        if scan.time >= self.back_at:
+            return PeerProposal(claimed=near, take=take, hand_back=(held,), state="done")
+        return PeerProposal(claimed=near, take=take, state=held)
+
+    def commit(self, proposal):
+        super().commit(proposal)
+        self.held = proposal.state
+
+
+def test_a_peer_takes_over_a_track_and_hands_it_back_under_its_id():
+    peer = Holder("T1", back_at=3.0)
+    p = TrackingPipeline(SINGLE_POINT, peers=[peer])
+    p.point.step(scan_at(0.0, [[0, 0], [1000, 0]]))
+    hits0 = {t.id: t.hits for t in p.point.snapshot()}["T1"]
+    p.process(scan_at(1.0, [[0, 0], [1000, 0]]))
+    assert [t.id for t in p.point.snapshot()] == ["T2"]  # T1 is the peer's now
+    assert peer.held.id == "T1"
+    p.process(scan_at(2.0, [[1, 0], [1000, 0]]))
+    assert [t.id for t in p.point.snapshot()] == ["T2"]  # its detection started nothing
+    p.process(scan_at(3.0, [[2, 0], [1000, 0]]))
+    assert peer.held == "done"
+    back = {t.id: t for t in p.point.snapshot()}
+    assert sorted(back) == ["T1", "T2"]
+    assert back["T1"].hits == hits0 + 3
+    assert back["T1"].updated == 3.0
+    assert back["T1"].position == pytest.approx((0.0, 0.0))
+    # The individual tracker goes on with it, and never hands out its id again.
+    p.process(scan_at(4.0, [[2, 0], [1000, 0], [5000, 5000]]))
+    snap = p.point.snapshot()
+    assert sorted(t.id for t in snap) == ["T1", "T2", "T3"]
+    assert {t.id: t.hits for t in snap}["T1"] == hits0 + 4
+
+
+def test_snapshots_cannot_change_the_tracker():
+    p = TrackingPipeline(SINGLE_POINT)
+    res = p.process(scan_at(0.0, [0, 0]))
+    snap = res.tracks[0]
+    with pytest.raises(ValueError):
+        snap.covariance[0, 0] = 1e9
+    assert p.snapshot()[0].covariance[0, 0] == pytest.approx(25.0)
+    with pytest.raises(ValueError):
+        p.point.tracks.x_comb[0, 0] = 1e9
+
+
+def test_reconfigure_reaches_every_peer():
+    peer = ScriptedPeer("extended", nothing)
+    p = TrackingPipeline(SINGLE_POINT, peers=[peer])
+    new = SINGLE_POINT.merged({"track_management": {"pd": 0.8}})
+    p.reconfigure(new)
+    assert peer.config == new
+    assert p.config == new
+
+
+def test_two_peers_of_one_kind_are_refused():
+    with pytest.raises(ValueError, match="one kind"):
+        TrackingPipeline(
+            SINGLE_POINT, peers=[ScriptedPeer("x", nothing), ScriptedPeer("x", nothing)]
+        )

@@ -1,0 +1,330 @@
+"""The peer interface: what trackers of other kinds may do in the individual tracker's step.
+
+A *peer* is a tracker of objects that give many detections a scan or that hold several point
+targets together: extended objects and groups (random matrices, paper 002), formations
+(template matching, paper 003), bending targets (point patterns, papers 000 and 001). Each
+scan, every peer sees the scan and the individual tracks predicted to the scan's time, and
+*proposes* what it will do; only when every peer and the point tracker have proposed without
+error does any of them *commit*. A failure anywhere changes nothing.
+
+A peer's :class:`PeerProposal` may
+
+- claim detections (``claimed``): a claimed detection is explained by the peer; it neither
+  updates nor starts an individual track;
+- change the detection probability of individual tracks, by id (``pd``, computed by the
+  peer however its model says, e.g. paper 002 eq. 28-30 from its extent and resolution
+  distance) or by geometry (``cells``: every track predicted inside the ellipse); where
+  several requests reach one track the lowest probability holds;
+- take over individual tracks (``take``): they leave the individual tracker at this scan,
+  keeping their ids, and the peer updates and reports them from then on (a formation takes its
+  members; an extended track absorbs the individual tracks that turn out to be one convoy);
+- hand tracks back (``hand_back``): full states that the individual tracker adopts at this
+  scan under their ids (a member leaving a formation, a convoy splitting);
+- report its own tracks (``tracks``) and the ids it deleted (``deleted``).
+
+What the first peers will call, written down before the interface was built:
+
+- extended (random matrix): ``propose(scan, view)`` gates ``scan.z`` against each extent
+  ellipse, partitions the gated detections by resolution distance, updates centroid and
+  extent with the likeliest partition and claims it; sets ``pd`` of each track of ``view``
+  whose predicted position ``view.x[:, :2]`` lies in its resolution cell; takes the ids of
+  individual tracks that move with it; hands back :class:`PointTrackState` when it splits.
+- formation (template matching): ``propose(scan, view)`` gates formation centres, matches the
+  template to the detections, updates its members with the matched ones and claims them;
+  takes over member tracks by id when it recognises a formation among ``view``'s confirmed
+  tracks; hands a member back when it leaves.
+
+The point tracker (GNN today, a track-oriented MHT later) sits behind :class:`PointTracker`:
+it predicts its tracks for the peers, then proposes its step under the peers'
+:class:`PointDirectives`, and commits.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any, Protocol
+
+import numpy as np
+
+from trackers.types import Scan, StepResult, TrackSnapshot
+
+if TYPE_CHECKING:
+    from trackers.config import TrackerConfig
+
+__all__ = [
+    "PeerError",
+    "PeerProposal",
+    "PeerTracker",
+    "PointDirectives",
+    "PointProposal",
+    "PointTrackState",
+    "PointTrackView",
+    "PointTracker",
+    "ResolutionCell",
+    "check_proposal",
+    "combine_directives",
+]
+
+
+class PeerError(RuntimeError):
+    """A peer failed or proposed something impossible; the message names the peer."""
+
+    def __init__(self, kind: str, detail: str) -> None:
+        super().__init__(f"peer {kind!r}: {detail}")
+        self.kind = kind
+        self.detail = detail
+
+
+def _read_only(a: np.ndarray) -> np.ndarray:
+    a = np.array(a, dtype=float, copy=True)
+    a.flags.writeable = False
+    return a
+
+
+@dataclass(frozen=True)
+class ResolutionCell:
+    """The ellipse ``(p − c)ᵀ M⁻¹ (p − c) ≤ 1`` inside which individual targets are detected
+    with probability ``pd`` (often much lower than the sensor's: the peer's object masks them)."""
+
+    center: np.ndarray
+    matrix: np.ndarray
+    pd: float
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "center", _read_only(np.reshape(self.center, 2)))
+        object.__setattr__(self, "matrix", _read_only(np.reshape(self.matrix, (2, 2))))
+
+    def contains(self, points: np.ndarray) -> np.ndarray:
+        """Boolean mask of the ``(n, 2)`` points inside the cell."""
+        d = np.asarray(points, dtype=float).reshape(-1, 2) - self.center
+        return np.einsum("ni,ij,nj->n", d, np.linalg.inv(self.matrix), d) <= 1.0
+
+
+@dataclass(frozen=True)
+class PointTrackState:
+    """A point track's full state, as handed between trackers.
+
+    ``x`` is ``[x, y, vx, vy, ω]`` (m, m/s, rad/s) with covariance ``P`` (5x5); ``score`` the
+    track's log-likelihood ratio; ``time`` the instant of ``x``.
+    """
+
+    id: str
+    time: float
+    x: np.ndarray
+    P: np.ndarray
+    score: float
+    hits: int
+    confirmed: bool
+    created: float
+    updated: float
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "x", _read_only(np.reshape(self.x, 5)))
+        object.__setattr__(self, "P", _read_only(np.reshape(self.P, (5, 5))))
+
+
+@dataclass(frozen=True, eq=False)
+class PointTrackView:
+    """The point tracker's live tracks predicted to ``time``, read-only: row ``i`` is track
+    ``ids[i]``, ``x (N, 5)`` its predicted state ``[x, y, vx, vy, ω]`` and ``P (N, 5, 5)`` its
+    covariance (moment-matched over the IMM modes); ``created`` and ``updated`` the times of
+    its first and latest detection."""
+
+    time: float
+    ids: tuple[str, ...]
+    x: np.ndarray
+    P: np.ndarray
+    score: np.ndarray
+    hits: np.ndarray
+    confirmed: np.ndarray
+    created: np.ndarray
+    updated: np.ndarray
+
+    def __post_init__(self) -> None:
+        for name in ("x", "P", "score", "created", "updated"):
+            object.__setattr__(self, name, _read_only(getattr(self, name)))
+        for name, dtype in (("hits", np.int64), ("confirmed", bool)):
+            a = np.array(getattr(self, name), dtype=dtype, copy=True)
+            a.flags.writeable = False
+            object.__setattr__(self, name, a)
+
+    def __len__(self) -> int:
+        return len(self.ids)
+
+    def index(self) -> dict[str, int]:
+        """Row of each id."""
+        return {tid: i for i, tid in enumerate(self.ids)}
+
+    def state(self, i: int) -> PointTrackState:
+        """Row ``i`` as a :class:`PointTrackState`."""
+        return PointTrackState(
+            id=self.ids[i],
+            time=self.time,
+            x=self.x[i],
+            P=self.P[i],
+            score=float(self.score[i]),
+            hits=int(self.hits[i]),
+            confirmed=bool(self.confirmed[i]),
+            created=float(self.created[i]),
+            updated=float(self.updated[i]),
+        )
+
+
+@dataclass(frozen=True, eq=False)
+class PeerProposal:
+    """What a peer proposes for one scan (see the module docstring). ``claimed`` is a boolean
+    mask over the scan's detections; ``state`` is the peer's own new state, given back to its
+    :meth:`PeerTracker.commit` unread by anyone else."""
+
+    claimed: np.ndarray
+    pd: Mapping[str, float] = field(default_factory=dict)
+    cells: tuple[ResolutionCell, ...] = ()
+    take: tuple[str, ...] = ()
+    hand_back: tuple[PointTrackState, ...] = ()
+    tracks: tuple[TrackSnapshot, ...] = ()
+    deleted: tuple[str, ...] = ()
+    state: Any = None
+
+
+class PeerTracker(Protocol):
+    """A tracker of another kind that takes part in every scan.
+
+    ``propose`` must not change the peer (it may be called and its proposal dropped, when
+    another tracker fails); ``commit`` makes the proposal the peer's state and must not fail.
+    ``reconfigure`` receives the whole configuration tree; a peer reads its own section.
+    """
+
+    kind: str
+
+    def propose(self, scan: Scan, view: PointTrackView) -> PeerProposal: ...
+
+    def commit(self, proposal: PeerProposal) -> None: ...
+
+    def snapshot(self) -> tuple[TrackSnapshot, ...]: ...
+
+    def reconfigure(self, config: TrackerConfig) -> None: ...
+
+
+@dataclass(frozen=True)
+class PointDirectives:
+    """What the peers ask of the point tracker for one scan: the detection probability of
+    named tracks (``pd``, the resolution cells' already folded in; the sensor's elsewhere),
+    the ids the peers take over (``release``) and the tracks they hand back (``adopt``)."""
+
+    pd: Mapping[str, float] = field(default_factory=dict)
+    release: frozenset[str] = frozenset()
+    adopt: tuple[PointTrackState, ...] = ()
+
+
+@dataclass(frozen=True, eq=False)
+class PointProposal:
+    """A point tracker's proposed step: ``result`` is what the step returns once committed,
+    ``released`` the states of the tracks the peers took; ``state`` is private to the tracker."""
+
+    result: StepResult
+    released: tuple[PointTrackState, ...]
+    state: Any
+
+
+class PointTracker(Protocol):
+    """The tracker of individual point targets inside the pipeline (GNN today; a
+    track-oriented MHT later), interchangeable by configuration."""
+
+    kind: str
+
+    @property
+    def config(self) -> TrackerConfig: ...
+
+    def reconfigure(self, config: TrackerConfig) -> None: ...
+
+    def predicted(self, time: float) -> PointTrackView: ...
+
+    def propose(self, scan: Scan, directives: PointDirectives = ...) -> PointProposal: ...
+
+    def commit(self, proposal: PointProposal) -> None: ...
+
+    def snapshot(self, confirmed_only: bool = False) -> tuple[TrackSnapshot, ...]: ...
+
+
+def check_proposal(kind: str, proposal: object, scan: Scan, view: PointTrackView) -> None:
+    """Raise :class:`PeerError` naming ``kind`` unless ``proposal`` is a :class:`PeerProposal`
+    whose ``claimed`` mask fits the scan, whose ``pd`` names live tracks with probabilities in
+    (0, 1], whose ``take`` names live tracks once each, and whose ``hand_back`` states are
+    finite with fresh ids."""
+    if not isinstance(proposal, PeerProposal):
+        raise PeerError(kind, f"propose returned {type(proposal).__name__}, not a PeerProposal")
+    claimed = np.asarray(proposal.claimed)
+    if claimed.dtype != bool or claimed.shape != (scan.size,):
+        raise PeerError(
+            kind,
+            f"claimed must be a boolean mask of {scan.size} detections, "
+            f"got {claimed.dtype} of shape {claimed.shape}",
+        )
+    live = set(view.ids)
+    for tid, p in proposal.pd.items():
+        if tid not in live:
+            raise PeerError(kind, f"pd names track {tid!r}, which is not a live point track")
+        if not (isinstance(p, int | float) and 0 < p <= 1):
+            raise PeerError(kind, f"pd of track {tid!r} must be in (0, 1], got {p!r}")
+    for cell in proposal.cells:
+        if not (0 < cell.pd <= 1) or not np.isfinite(cell.center).all():
+            raise PeerError(kind, "a resolution cell needs a finite centre and pd in (0, 1]")
+        M = cell.matrix
+        if not (np.isfinite(M).all() and M[0, 0] > 0 and np.linalg.det(M) > 0):
+            raise PeerError(kind, "a resolution cell's matrix must be positive definite")
+    if len(set(proposal.take)) != len(proposal.take):
+        raise PeerError(kind, "take names a track twice")
+    for tid in proposal.take:
+        if tid not in live:
+            raise PeerError(kind, f"take names track {tid!r}, which is not a live point track")
+    seen: set[str] = set()
+    for st in proposal.hand_back:
+        if not isinstance(st, PointTrackState):
+            raise PeerError(kind, "hand_back holds something other than a PointTrackState")
+        if st.id in live or st.id in seen:
+            raise PeerError(kind, f"hand_back id {st.id!r} is already a live point track")
+        seen.add(st.id)
+        if not (np.isfinite(st.x).all() and np.isfinite(st.P).all() and math.isfinite(st.score)):
+            raise PeerError(kind, f"hand_back track {st.id!r} has a non-finite state or score")
+        P = st.P
+        if not np.allclose(P, P.T) or np.linalg.eigvalsh(P).min() <= 0:
+            raise PeerError(
+                kind, f"hand_back track {st.id!r}: P is not symmetric positive definite"
+            )
+        if abs(st.time - scan.time) > 1e-9:
+            raise PeerError(kind, f"hand_back track {st.id!r} is at {st.time}, not the scan's time")
+
+
+def combine_directives(
+    kinds: tuple[str, ...], proposals: tuple[PeerProposal, ...], view: PointTrackView
+) -> PointDirectives:
+    """The point tracker's directives from every peer's (checked) proposal: cells and per-track
+    probabilities with the lowest holding where they meet; a track taken or an id handed back
+    by two peers is an error naming the second."""
+    pd: dict[str, float] = {}
+    cells: list[ResolutionCell] = []
+    taken: dict[str, str] = {}
+    adopt: list[PointTrackState] = []
+    handed: dict[str, str] = {}
+    for kind, prop in zip(kinds, proposals, strict=True):
+        for tid, p in prop.pd.items():
+            pd[tid] = min(pd.get(tid, 1.0), float(p))
+        cells.extend(prop.cells)
+        for tid in prop.take:
+            if tid in taken:
+                raise PeerError(kind, f"track {tid!r} is already taken by peer {taken[tid]!r}")
+            taken[tid] = kind
+        for st in prop.hand_back:
+            if st.id in handed:
+                raise PeerError(kind, f"id {st.id!r} is also handed back by peer {handed[st.id]!r}")
+            handed[st.id] = kind
+            adopt.append(st)
+    if cells and len(view):
+        xy = view.x[:, :2]
+        for cell in cells:
+            for i in np.flatnonzero(cell.contains(xy)).tolist():
+                tid = view.ids[i]
+                pd[tid] = min(pd.get(tid, 1.0), cell.pd)
+    return PointDirectives(pd=pd, release=frozenset(taken), adopt=tuple(adopt))
