@@ -29,6 +29,7 @@ import orjson
 import zenoh
 
 from clients.zenoh_session import open_session
+from service.keys import DEFAULT_PREFIX, Keys
 
 __all__ = ["build_parser", "format_table", "main", "rest_reports", "zenoh_reports"]
 
@@ -118,8 +119,9 @@ def zenoh_reports(
     """Reports over Zenoh: published ones (subscriber on ``{prefix}/tracks``) or answers of
     the queryable ``{prefix}/state/tracks`` (polled every ``interval`` s while following)."""
     kinds = {k for k in (kind or "").split(",") if k} or None
+    keys = Keys(prefix)
     if query:
-        selector = f"{prefix}/state/tracks"
+        selector = keys.state
         params = [f"status={status}"] + ([f"kind={kind}"] if kind else [])
         selector += "?" + ";".join(params)
 
@@ -131,7 +133,7 @@ def zenoh_reports(
                 got = True
                 yield orjson.loads(reply.ok.payload.to_bytes())
             if not got and not follow:
-                raise TimeoutError(f"no answer from {prefix}/state/tracks in {timeout} s")
+                raise TimeoutError(f"no answer from {keys.state} in {timeout} s")
 
         yield from _poll(fetch, follow=follow, interval=interval)
         return
@@ -141,14 +143,14 @@ def zenoh_reports(
         with contextlib.suppress(queue.Full):
             inbox.put_nowait(sample.payload.to_bytes())
 
-    sub = session.declare_subscriber(f"{prefix}/tracks", on_sample)
+    sub = session.declare_subscriber(keys.tracks, on_sample)
     try:
         first = True
         while True:
             try:
                 data = inbox.get(timeout=timeout if first else None)
             except queue.Empty:
-                raise TimeoutError(f"no report on {prefix}/tracks in {timeout} s") from None
+                raise TimeoutError(f"no report on {keys.tracks} in {timeout} s") from None
             first = False
             yield _filter(orjson.loads(data), kinds)
             if not follow:
@@ -182,7 +184,9 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--timeout", type=float, default=10.0, help="seconds to wait for an answer")
     parser.add_argument("--count", type=int, help="stop after this many reports")
     parser.add_argument("--mode", choices=("peer", "client"), default="peer")
-    parser.add_argument("--prefix", default="tracking", help="key prefix (default tracking)")
+    parser.add_argument(
+        "--prefix", default=DEFAULT_PREFIX, help=f"key prefix (default {DEFAULT_PREFIX})"
+    )
     return parser
 
 

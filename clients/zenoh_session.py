@@ -1,10 +1,11 @@
-"""Zenoh sessions for the clients (and the service's demo publisher).
+"""Zenoh sessions for the clients.
 
 :func:`add_zenoh_arguments` gives every client the same flags (``--connect``, ``--mode``,
-``--listen``, ``--prefix``); :func:`open_session` opens a session with multicast scouting
-off; :class:`BatchPublisher` puts detection batches on ``{prefix}/detections/{sensor_id}``
-with one declared, reliable, ``CongestionControl.BLOCK`` publisher per sensor, waiting for a
-subscriber to match before the first put.
+``--listen``, ``--prefix``); :func:`open_session` opens a session configured as the service
+configures its own (:func:`service.keys.make_config`: multicast scouting off);
+:class:`BatchPublisher` puts detection batches on ``{prefix}/detections/{sensor_id}`` with one
+declared, reliable, ``CongestionControl.BLOCK`` publisher per sensor, waiting for a
+subscriber to match before the first put. Key expressions come from :mod:`service.keys`.
 
 Always close the session (``with open_session(...) as session:``): a process whose session
 still has a callback subscriber never exits.
@@ -14,7 +15,6 @@ from __future__ import annotations
 
 import argparse
 import contextlib
-import json
 import re
 import threading
 import time
@@ -24,12 +24,13 @@ from typing import Any
 import orjson
 import zenoh
 
+from service.keys import DEFAULT_PREFIX, Keys, make_config
+
 __all__ = [
     "DEFAULT_ENDPOINT",
     "BatchPublisher",
     "ReportCounter",
     "add_zenoh_arguments",
-    "client_endpoints",
     "open_session",
     "session_from_args",
 ]
@@ -44,24 +45,7 @@ def open_session(
 ) -> zenoh.Session:
     """A session in ``mode`` connecting to ``connect`` (and listening on ``listen``, unless a
     client), multicast scouting off. Raises ``zenoh.ZError`` when it cannot open."""
-    conf = zenoh.Config()
-    conf.insert_json5("mode", json.dumps(mode))
-    conf.insert_json5("connect/endpoints", json.dumps(list(connect)))
-    if mode != "client":
-        conf.insert_json5("listen/endpoints", json.dumps(list(listen)))
-    conf.insert_json5("scouting/multicast/enabled", "false")
-    return zenoh.open(conf)
-
-
-def client_endpoints(listen: Sequence[str]) -> list[str]:
-    """Endpoints to reach a service listening on ``listen`` from the same machine (a wildcard
-    address becomes loopback)."""
-    out = []
-    for ep in listen:
-        proto, _, addr = ep.partition("/")
-        addr = addr.replace("0.0.0.0:", "127.0.0.1:").replace("[::]:", "[::1]:")
-        out.append(f"{proto}/{addr}")
-    return out
+    return zenoh.open(make_config(mode, listen, connect))
 
 
 def add_zenoh_arguments(parser: argparse.ArgumentParser) -> None:
@@ -82,7 +66,9 @@ def add_zenoh_arguments(parser: argparse.ArgumentParser) -> None:
     group.add_argument(
         "--listen", action="append", metavar="ENDPOINT", default=[], help="endpoint to listen on"
     )
-    group.add_argument("--prefix", default="tracking", help="key prefix (default tracking)")
+    group.add_argument(
+        "--prefix", default=DEFAULT_PREFIX, help=f"key prefix (default {DEFAULT_PREFIX})"
+    )
 
 
 def session_from_args(args: argparse.Namespace) -> zenoh.Session:
@@ -99,13 +85,13 @@ class BatchPublisher:
     def __init__(
         self,
         session: zenoh.Session,
-        prefix: str = "tracking",
+        prefix: str = DEFAULT_PREFIX,
         *,
         wait_matching: float = 5.0,
         congestion_control: zenoh.CongestionControl = zenoh.CongestionControl.BLOCK,
     ) -> None:
         self.session = session
-        self.prefix = prefix
+        self.keys = Keys(prefix)
         self.wait_matching = wait_matching
         self._cc = congestion_control
         self._publishers: dict[str, zenoh.Publisher] = {}
@@ -115,7 +101,7 @@ class BatchPublisher:
         self.sensors: set[str] = set()
 
     def key(self, sensor_id: str) -> str:
-        return f"{self.prefix}/detections/{sensor_id}"
+        return self.keys.detections(sensor_id)
 
     def publisher(self, sensor_id: str) -> zenoh.Publisher:
         pub = self._publishers.get(sensor_id)
@@ -186,9 +172,10 @@ class ReportCounter:
         self.errors = 0
         self._on_error_cb = on_error
         self._cond = threading.Condition()
+        keys = Keys(prefix)
         self._subs = [
-            session.declare_subscriber(f"{prefix}/tracks", self._on_tracks),
-            session.declare_subscriber(f"{prefix}/errors/**", self._on_error),
+            session.declare_subscriber(keys.tracks, self._on_tracks),
+            session.declare_subscriber(keys.all_errors, self._on_error),
         ]
 
     @staticmethod
@@ -214,7 +201,7 @@ class ReportCounter:
 
     def _on_error(self, sample: zenoh.Sample) -> None:
         data = sample.payload.to_bytes()
-        sensor = str(sample.key_expr).rsplit("/", 1)[-1]
+        sensor = Keys.last_chunk(str(sample.key_expr))
         if sensor in self.sensors:
             with self._cond:
                 self.errors += 1

@@ -11,6 +11,7 @@ import contextlib
 import logging
 import secrets
 import signal
+import subprocess
 import sys
 import threading
 from collections.abc import AsyncIterator, Sequence
@@ -23,12 +24,11 @@ from fastapi.openapi.utils import get_openapi
 
 from service import __version__
 from service.api import api_router
-from service.engine import ConfigError, Engine, load_config_file
-from service.schemas import (
-    ConfigDocument,
-    DetectionBatchIn,
-    IngestConfig,
-)
+from service.config_store import load_config_file
+from service.config_tree import ConfigDocument, ConfigError
+from service.engine import Engine
+from service.keys import local_endpoints
+from service.schemas import DetectionBatchIn, IngestConfig
 from service.settings import Settings, SettingsLoadError, load_settings
 from service.stats import Stats
 from service.zenoh_io import ZenohIO
@@ -59,16 +59,51 @@ class ZenohStartError(RuntimeError):
     """The Zenoh session could not be opened (the message says why)."""
 
 
+def demo_command(settings: Settings) -> list[str] | None:
+    """The command line of the demo client (``python -m clients.demo``) for this service:
+    connected to its listen endpoints (its connect endpoints in client mode, or when it
+    listens on none). ``None`` when it has no Zenoh endpoint to reach."""
+    s = settings
+    listen = s.zenoh_listen if s.zenoh_mode != "client" else []
+    endpoints = local_endpoints(listen or s.zenoh_connect)
+    if not endpoints:
+        return None
+    command = [sys.executable, "-m", "clients.demo", "--exit-with-parent"]
+    for endpoint in endpoints:
+        command += ["--connect", endpoint]
+    command += [
+        "--prefix",
+        s.key_prefix,
+        "--summary-interval",
+        repr(s.demo_summary_interval),
+        "--log-level",
+        s.log_level,
+    ]
+    return command
+
+
+def _stop_process(proc: subprocess.Popen[bytes], timeout: float = 2.0) -> None:
+    """SIGTERM, then SIGKILL after ``timeout`` seconds."""
+    if proc.poll() is None:
+        proc.terminate()
+        try:
+            proc.wait(timeout)
+        except subprocess.TimeoutExpired:
+            log.warning("the demo client did not stop within %.1f s; killing it", timeout)
+            proc.kill()
+            proc.wait(5)
+
+
 class ServiceRuntime:
     """What runs besides the web server: the engine's worker, the Zenoh session and the demo
-    publisher. :meth:`start` and :meth:`stop` are idempotent, so the entry point can start
+    client. :meth:`start` and :meth:`stop` are idempotent, so the entry point can start
     it before uvicorn (to fail early and cleanly) and the lifespan still stops it."""
 
     def __init__(self, settings: Settings, engine: Engine) -> None:
         self.settings = settings
         self.engine = engine
         self.zenoh: ZenohIO | None = None
-        self.demo: Any = None
+        self.demo: subprocess.Popen[bytes] | None = None
         self._lock = threading.Lock()
 
     def start(self) -> None:
@@ -104,10 +139,7 @@ class ServiceRuntime:
             self.engine.sink = zio
             self.zenoh = zio
             if s.demo:
-                from service.demo import DemoPublisher
-
-                self.demo = DemoPublisher(s, self.engine)
-                self.demo.start()
+                self._start_demo()
             log.info(
                 "tracker-service %s ready: instance %s, key prefix %r",
                 __version__,
@@ -120,7 +152,7 @@ class ServiceRuntime:
             if self.zenoh is None:
                 return
             if self.demo is not None:
-                self.demo.stop()
+                _stop_process(self.demo)
                 self.demo = None
             # no new batches; the queued ones are tracked and their reports still go out
             self.zenoh.stop_intake()
@@ -129,11 +161,19 @@ class ServiceRuntime:
             self.zenoh = None
             log.info("tracker-service stopped")
 
+    def _start_demo(self) -> None:
+        command = demo_command(self.settings)
+        if command is None:
+            log.warning("demo: the service has no Zenoh endpoint to reach; no demo client")
+            return
+        self.demo = subprocess.Popen(command, stdin=subprocess.DEVNULL)
+        log.info("demo: started the demo client (pid %d): %s", self.demo.pid, " ".join(command[1:]))
+
 
 def create_app(settings: Settings | None = None) -> FastAPI:
     """The service as a FastAPI app. The engine is built here (loading ``config_file`` when it
-    exists: a bad file raises :class:`~service.engine.ConfigError`); the lifespan starts it,
-    opens Zenoh (and the demo publisher), and closes everything on shutdown."""
+    exists: a bad file raises :class:`~service.config_store.ConfigError`); the lifespan starts it,
+    opens Zenoh (and starts the demo client), and closes everything on shutdown."""
     settings = settings or Settings()
     ingest_defaults = IngestConfig(
         max_detections_per_batch=settings.max_detections_per_batch,

@@ -30,7 +30,6 @@ __all__ = [
     "ERROR_REASONS",
     "SENSOR_ID_PATTERN",
     "BatchError",
-    "ConfigDocument",
     "DetectionBatchIn",
     "DetectionIn",
     "ErrorReportOut",
@@ -337,18 +336,3 @@ class IngestConfig(BaseModel):
             "otherwise put every later batch out of sequence"
         ),
     )
-
-
-class ConfigDocument(BaseModel):
-    """The REST configuration document: the tracker's configuration sections (see
-    ``trackers.config.TrackerConfig``) plus ``ingest``. PUT replaces it (missing fields take
-    their defaults), PATCH merges into it (JSON merge patch: ``null`` resets a field)."""
-
-    model_config = ConfigDict(extra="allow")
-
-    motion: dict[str, Any] | None = None
-    measurement: dict[str, Any] | None = None
-    initiation: dict[str, Any] | None = None
-    gating: dict[str, Any] | None = None
-    track_management: dict[str, Any] | None = None
-    ingest: IngestConfig | None = None

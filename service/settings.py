@@ -26,10 +26,12 @@ from pydantic_settings import (
     SettingsConfigDict,
 )
 
-from service.schemas import MAX_REORDER_WINDOW
+from service.keys import DEFAULT_PREFIX
+from service.schemas import MAX_REORDER_WINDOW, IngestConfig
 
 __all__ = ["Settings", "SettingsLoadError", "build_parser", "load_settings", "split_endpoints"]
 
+_INGEST = IngestConfig.model_fields
 _KEY_PREFIX_RE = re.compile(r"^[^/*$#?\s]+(/[^/*$#?\s]+)*$")
 _INSTANCE_RE = re.compile(r"^[A-Za-z0-9_.\-]{1,64}$")
 
@@ -92,7 +94,7 @@ class Settings(BaseSettings):
         ),
     )
     key_prefix: str = Field(
-        default="tracking", description="first chunk(s) of every key expression"
+        default=DEFAULT_PREFIX, description="first chunk(s) of every key expression"
     )
     instance_id: str = Field(
         default_factory=lambda: secrets.token_hex(4),
@@ -116,17 +118,20 @@ class Settings(BaseSettings):
         le=3600,
         description="seconds a full queue may block a sender before a drop",
     )
+    # The ingest section's defaults: written once, in service.schemas.IngestConfig.
     max_detections_per_batch: int = Field(
-        default=10000, ge=1, description="default of the config's ingest.max_detections_per_batch"
+        default=_INGEST["max_detections_per_batch"].default,
+        ge=1,
+        description="default of the config's ingest.max_detections_per_batch",
     )
     reorder_window: float = Field(
-        default=0.0,
+        default=_INGEST["reorder_window"].default,
         ge=0,
         le=MAX_REORDER_WINDOW,
         description="default of the config's ingest.reorder_window, s",
     )
     max_time_jump: float = Field(
-        default=3600.0,
+        default=_INGEST["max_time_jump"].default,
         gt=0,
         allow_inf_nan=False,
         description="default of the config's ingest.max_time_jump, s",
@@ -135,7 +140,13 @@ class Settings(BaseSettings):
         default="block", description="congestion control of the outgoing track and error reports"
     )
     log_level: Literal["critical", "error", "warning", "info", "debug"] = "info"
-    demo: bool = Field(default=False, description="also publish a simulated scenario in-process")
+    demo: bool = Field(
+        default=False,
+        description=(
+            "also run the demo client (python -m clients.demo): the reference scenario "
+            "published to this service in real time, and a summary of its tracks logged"
+        ),
+    )
     demo_summary_interval: float = Field(
         default=5.0, gt=0, description="seconds between the demo's one-line track summaries"
     )

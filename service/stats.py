@@ -1,8 +1,14 @@
-"""Counters and processing-time percentiles, as JSON (``/api/v1/stats``) and as Prometheus
-text (``/metrics``).
+"""What the service has done since it started, as Prometheus metrics (``/metrics``, through
+``prometheus_client``) and as the JSON document of ``/api/v1/stats``.
 
-Every method is thread-safe: the engine's worker, the Zenoh callback threads and the REST
-handlers all touch the same :class:`Stats`.
+Each :class:`Stats` has its own ``CollectorRegistry`` (two services in one process, as in the
+tests, count apart). The counters, gauges and histograms are the one record; the JSON reads
+them, and adds processing-time percentiles over the latest :data:`WINDOW` batches. Every
+method is thread-safe: the engine's worker, the Zenoh callback threads and the REST handlers
+all touch the same :class:`Stats`.
+
+``prometheus_client``'s ``*_created`` series are turned off for the whole process (they say
+when each series was created, which the service's uptime already tells).
 """
 
 from __future__ import annotations
@@ -14,61 +20,154 @@ from collections.abc import Callable
 from typing import Any
 
 import numpy as np
+from prometheus_client import (
+    CollectorRegistry,
+    Counter,
+    Gauge,
+    Histogram,
+    Info,
+    disable_created_metrics,
+    generate_latest,
+)
 
 from service.schemas import ERROR_REASONS
 
-_REJECT_REASONS = {reason: 0 for reason in ERROR_REASONS if reason != "overloaded"}
+__all__ = ["BATCH_SIZE_BUCKETS", "PROCESSING_BUCKETS", "WINDOW", "Stats"]
 
-__all__ = ["WINDOW", "Stats"]
+disable_created_metrics()
 
-#: How many of the latest batches the processing-time percentiles are over.
+#: How many of the latest batches the JSON's processing-time percentiles are over.
 WINDOW = 2048
+
+#: Upper bounds of ``tracker_processing_seconds``: 0.5 ms to 5 s.
+PROCESSING_BUCKETS = (
+    0.0005,
+    0.001,
+    0.002,
+    0.005,
+    0.01,
+    0.02,
+    0.05,
+    0.1,
+    0.2,
+    0.5,
+    1.0,
+    2.0,
+    5.0,
+)
+
+#: Upper bounds of ``tracker_batch_detections``.
+BATCH_SIZE_BUCKETS = (0, 1, 5, 10, 25, 50, 100, 250, 500, 1000, 2500, 5000, 10000)
+
+#: Reasons with a ``tracker_batches_rejected_total`` series from the start; drops
+#: (``overloaded``) have a counter of their own.
+_REJECT_REASONS = tuple(reason for reason in ERROR_REASONS if reason != "overloaded")
 
 
 class Stats:
-    """What the service has done since it started."""
+    """Counters, gauges and histograms of one service instance."""
 
     def __init__(self, instance_id: str, queue_capacity: int = 0) -> None:
         self.instance_id = instance_id
         self.queue_capacity = queue_capacity
         self.started = time.time()
         self._started_mono = time.monotonic()
-        self._lock = threading.Lock()
-        self.batches_received = 0
-        self.batches_processed = 0
-        self.batches_dropped = 0
-        self.rejected: dict[str, int] = {}
-        self.detections_received = 0
-        self.detections_processed = 0
-        self.bytes_received = 0
-        self.tracks_confirmed = 0
-        #: Tentative tracks are counted on demand: building them all each batch is not free.
+        #: Read when asked: tentative tracks (building them all each batch is not free), the
+        #: batches waiting in the queue and those held by the reorder window.
         self.tracks_tentative: Callable[[], int] = lambda: 0
+        self.queue_depth: Callable[[], int] = lambda: 0
+        self.held_for_reorder: Callable[[], int] = lambda: 0
         self.seq = 0
         self.last_time: float | None = None
-        self.processing_seconds_sum = 0.0
+        self.tracks_confirmed = 0
         self._times: deque[float] = deque(maxlen=WINDOW)
-        self.queue_depth = lambda: 0
-        self.held_for_reorder = lambda: 0
+        self._lock = threading.Lock()  # the window and the last batch's figures
+
+        r = self.registry = CollectorRegistry(auto_describe=True)
+        Info("tracker", "Constant 1, labelled with this instance's id.", registry=r).info(
+            {"instance_id": instance_id}
+        )
+        Gauge("tracker_uptime_seconds", "Seconds since start-up.", registry=r).set_function(
+            self.uptime
+        )
+        self._received = Counter(
+            "tracker_batches_received",
+            "Detection batches received over Zenoh and REST.",
+            registry=r,
+        )
+        self._processed = Counter(
+            "tracker_batches_processed", "Detection batches the tracker processed.", registry=r
+        )
+        self._rejected = Counter(
+            "tracker_batches_rejected",
+            "Detection batches refused with an Error report, by reason.",
+            ["reason"],
+            registry=r,
+        )
+        for reason in _REJECT_REASONS:  # every series from the start: rates need no absent ones
+            self._rejected.labels(reason=reason)
+        self._dropped = Counter(
+            "tracker_batches_dropped",
+            "Detection batches dropped because the ingest queue stayed full.",
+            registry=r,
+        )
+        self._detections_received = Counter(
+            "tracker_detections_received",
+            "Detections in the batches that could be read.",
+            registry=r,
+        )
+        self._detections_processed = Counter(
+            "tracker_detections_processed",
+            "Detections in the batches the tracker processed.",
+            registry=r,
+        )
+        self._bytes = Counter(
+            "tracker_received_bytes", "Bytes of detection batch payloads received.", registry=r
+        )
+        tracks = Gauge(
+            "tracker_tracks",
+            "Live tracks after the last processed batch, by status.",
+            ["status"],
+            registry=r,
+        )
+        tracks.labels(status="confirmed").set_function(lambda: self.tracks_confirmed)
+        tracks.labels(status="tentative").set_function(lambda: self.tracks_tentative())
+        Gauge(
+            "tracker_ingest_queue_depth", "Batches waiting for the tracker.", registry=r
+        ).set_function(lambda: self.queue_depth())
+        Gauge(
+            "tracker_reorder_held_batches", "Batches held back by the reorder window.", registry=r
+        ).set_function(lambda: self.held_for_reorder())
+        Gauge("tracker_last_seq", "seq of the last Track report.", registry=r).set_function(
+            lambda: self.seq
+        )
+        self._processing = Histogram(
+            "tracker_processing_seconds",
+            "Tracker time per processed batch.",
+            buckets=PROCESSING_BUCKETS,
+            registry=r,
+        )
+        self._batch_size = Histogram(
+            "tracker_batch_detections",
+            "Detections per processed batch.",
+            buckets=BATCH_SIZE_BUCKETS,
+            registry=r,
+        )
 
     # -- recording ------------------------------------------------------------------------
 
     def received(self, nbytes: int) -> None:
-        with self._lock:
-            self.batches_received += 1
-            self.bytes_received += nbytes
+        self._received.inc()
+        self._bytes.inc(nbytes)
 
     def detections_in(self, n: int) -> None:
-        with self._lock:
-            self.detections_received += n
+        self._detections_received.inc(n)
 
     def rejected_batch(self, reason: str) -> None:
-        with self._lock:
-            self.rejected[reason] = self.rejected.get(reason, 0) + 1
+        self._rejected.labels(reason=reason).inc()
 
     def dropped(self) -> None:
-        with self._lock:
-            self.batches_dropped += 1
+        self._dropped.inc()
 
     def processed(
         self,
@@ -78,18 +177,23 @@ class Stats:
         processing_ms: float,
         confirmed: int,
     ) -> None:
+        self._processed.inc()
+        self._detections_processed.inc(n_detections)
+        self._processing.observe(processing_ms / 1000.0)
+        self._batch_size.observe(n_detections)
         with self._lock:
-            self.batches_processed += 1
-            self.detections_processed += n_detections
             self.seq = seq
             self.last_time = time_
             self.tracks_confirmed = confirmed
-            self.processing_seconds_sum += processing_ms / 1000.0
             self._times.append(processing_ms)
 
     # -- reading --------------------------------------------------------------------------
 
+    def uptime(self) -> float:
+        return time.monotonic() - self._started_mono
+
     def percentiles(self) -> dict[str, float | int]:
+        """Processing times, ms, over the latest :data:`WINDOW` batches."""
         with self._lock:
             times = np.fromiter(self._times, dtype=float, count=len(self._times))
         if times.size == 0:
@@ -106,150 +210,40 @@ class Stats:
 
     def snapshot(self) -> dict[str, Any]:
         """The ``/api/v1/stats`` document (see :class:`service.schemas.StatsOut`)."""
-        pct = self.percentiles()
-        tentative = int(self.tracks_tentative())
+        rejected: dict[str, int] = {}
+        for sample in self._rejected.collect()[0].samples:
+            if sample.name.endswith("_total") and sample.value:
+                rejected[sample.labels["reason"]] = int(sample.value)
         with self._lock:
-            return {
-                "instance_id": self.instance_id,
-                "uptime_s": round(time.monotonic() - self._started_mono, 3),
-                "seq": self.seq,
-                "last_time": self.last_time,
-                "batches_received": self.batches_received,
-                "batches_processed": self.batches_processed,
-                "batches_rejected": sum(self.rejected.values()),
-                "rejected_by_reason": dict(sorted(self.rejected.items())),
-                "batches_dropped": self.batches_dropped,
-                "detections_received": self.detections_received,
-                "detections_processed": self.detections_processed,
-                "tracks_confirmed": self.tracks_confirmed,
-                "tracks_tentative": tentative,
-                "queue_depth": int(self.queue_depth()),
-                "queue_capacity": self.queue_capacity,
-                "held_for_reorder": int(self.held_for_reorder()),
-                "processing_ms": pct,
-            }
+            seq, last_time, confirmed = self.seq, self.last_time, self.tracks_confirmed
+        return {
+            "instance_id": self.instance_id,
+            "uptime_s": round(self.uptime(), 3),
+            "seq": seq,
+            "last_time": last_time,
+            "batches_received": _count(self._received),
+            "batches_processed": _count(self._processed),
+            "batches_rejected": sum(rejected.values()),
+            "rejected_by_reason": dict(sorted(rejected.items())),
+            "batches_dropped": _count(self._dropped),
+            "detections_received": _count(self._detections_received),
+            "detections_processed": _count(self._detections_processed),
+            "tracks_confirmed": confirmed,
+            "tracks_tentative": int(self.tracks_tentative()),
+            "queue_depth": int(self.queue_depth()),
+            "queue_capacity": self.queue_capacity,
+            "held_for_reorder": int(self.held_for_reorder()),
+            "processing_ms": self.percentiles(),
+        }
 
-    def prometheus(self) -> str:
+    def prometheus(self) -> bytes:
         """The Prometheus text exposition format (version 0.0.4)."""
-        snap = self.snapshot()
-        with self._lock:
-            seconds_sum = self.processing_seconds_sum
-            nbytes = self.bytes_received
-        lines: list[str] = []
-
-        def metric(name: str, kind: str, help_text: str, samples: list[tuple[str, Any]]) -> None:
-            lines.append(f"# HELP {name} {help_text}")
-            lines.append(f"# TYPE {name} {kind}")
-            for labels, value in samples:
-                lines.append(f"{name}{labels} {_number(value)}")
-
-        metric(
-            "tracker_info",
-            "gauge",
-            "Constant 1, labelled with this instance's id.",
-            [(f'{{instance_id="{_escape(self.instance_id)}"}}', 1)],
-        )
-        metric(
-            "tracker_uptime_seconds", "gauge", "Seconds since start-up.", [("", snap["uptime_s"])]
-        )
-        metric(
-            "tracker_batches_received_total",
-            "counter",
-            "Detection batches received over Zenoh and REST.",
-            [("", snap["batches_received"])],
-        )
-        metric(
-            "tracker_batches_processed_total",
-            "counter",
-            "Detection batches the tracker processed.",
-            [("", snap["batches_processed"])],
-        )
-        metric(
-            "tracker_batches_rejected_total",
-            "counter",
-            "Detection batches refused with an Error report, by reason.",
-            # every reason from the start, so that rates need no absent series; drops
-            # ("overloaded") have a counter of their own
-            [
-                (f'{{reason="{_escape(r)}"}}', n)
-                for r, n in {**_REJECT_REASONS, **snap["rejected_by_reason"]}.items()
-            ],
-        )
-        metric(
-            "tracker_batches_dropped_total",
-            "counter",
-            "Detection batches dropped because the ingest queue stayed full.",
-            [("", snap["batches_dropped"])],
-        )
-        metric(
-            "tracker_detections_received_total",
-            "counter",
-            "Detections in the batches that could be read.",
-            [("", snap["detections_received"])],
-        )
-        metric(
-            "tracker_detections_processed_total",
-            "counter",
-            "Detections in the batches the tracker processed.",
-            [("", snap["detections_processed"])],
-        )
-        metric(
-            "tracker_received_bytes_total",
-            "counter",
-            "Bytes of detection batch payloads received.",
-            [("", nbytes)],
-        )
-        metric(
-            "tracker_tracks",
-            "gauge",
-            "Live tracks after the last processed batch, by status.",
-            [
-                ('{status="confirmed"}', snap["tracks_confirmed"]),
-                ('{status="tentative"}', snap["tracks_tentative"]),
-            ],
-        )
-        metric(
-            "tracker_ingest_queue_depth",
-            "gauge",
-            "Batches waiting for the tracker.",
-            [("", snap["queue_depth"])],
-        )
-        metric(
-            "tracker_reorder_held_batches",
-            "gauge",
-            "Batches held back by the reorder window.",
-            [("", snap["held_for_reorder"])],
-        )
-        metric(
-            "tracker_last_seq",
-            "gauge",
-            "seq of the last Track report.",
-            [("", snap["seq"])],
-        )
-        pct = snap["processing_ms"]
-        metric(
-            "tracker_processing_seconds",
-            "summary",
-            f"Tracker time per batch; quantiles over the last {WINDOW} batches.",
-            [
-                ('{quantile="0.5"}', pct["p50"] / 1000.0),
-                ('{quantile="0.9"}', pct["p90"] / 1000.0),
-                ('{quantile="0.99"}', pct["p99"] / 1000.0),
-                ('{quantile="1"}', pct["max"] / 1000.0),
-            ],
-        )
-        lines.append(f"tracker_processing_seconds_sum {_number(seconds_sum)}")
-        lines.append(f"tracker_processing_seconds_count {snap['batches_processed']}")
-        return "\n".join(lines) + "\n"
+        return generate_latest(self.registry)
 
 
-def _escape(value: str) -> str:
-    return value.replace("\\", "\\\\").replace("\n", "\\n").replace('"', '\\"')
-
-
-def _number(value: Any) -> str:
-    if isinstance(value, bool):
-        return "1" if value else "0"
-    if isinstance(value, int):
-        return str(value)
-    return repr(float(value))
+def _count(counter: Counter) -> int:
+    """An unlabelled counter's value."""
+    for sample in counter.collect()[0].samples:
+        if sample.name.endswith("_total"):
+            return int(sample.value)
+    return 0

@@ -9,7 +9,6 @@ session with a callback subscriber open never exits.
 
 from __future__ import annotations
 
-import json
 import logging
 import threading
 from collections.abc import Callable
@@ -20,37 +19,13 @@ from typing import Any
 import zenoh
 
 from service.convert import dumps
+from service.keys import Keys, make_config
 
-__all__ = ["ZenohIO", "make_config", "parse_selector_filters"]
+__all__ = ["ZenohIO", "parse_selector_filters"]
 
 log = logging.getLogger("service.zenoh")
 
 _JSON = zenoh.Encoding.APPLICATION_JSON
-
-
-def make_config(
-    mode: str,
-    listen: list[str],
-    connect: list[str],
-    *,
-    config_file: Path | None = None,
-    multicast_scouting: bool = False,
-    shared_memory: bool = False,
-) -> zenoh.Config:
-    """A Zenoh config: ``mode``, endpoints, multicast scouting and the shared-memory transport
-    off unless asked for.
-
-    ``config_file`` (JSON5) is the starting point when given; the other arguments override it.
-    A client does not listen, so ``listen`` is ignored in client mode."""
-    conf = zenoh.Config.from_file(str(config_file)) if config_file else zenoh.Config()
-    conf.insert_json5("mode", json.dumps(mode))
-    if mode != "client":
-        conf.insert_json5("listen/endpoints", json.dumps(list(listen)))
-    if connect or not config_file:
-        conf.insert_json5("connect/endpoints", json.dumps(list(connect)))
-    conf.insert_json5("scouting/multicast/enabled", "true" if multicast_scouting else "false")
-    conf.insert_json5("transport/shared_memory/enabled", "true" if shared_memory else "false")
-    return conf
 
 
 _STATUSES = ("confirmed", "tentative", "all")
@@ -102,7 +77,7 @@ class ZenohIO:
         self.mode = mode
         self.listen = listen
         self.connect = connect
-        self.prefix = key_prefix
+        self.keys = Keys(key_prefix)
         self.instance_id = instance_id
         self._submit = submit
         self._report_bytes = report_bytes
@@ -122,25 +97,6 @@ class ZenohIO:
         self._token: Any = None
         self._tracks_pub: zenoh.Publisher | None = None
 
-    @property
-    def detections_key(self) -> str:
-        return f"{self.prefix}/detections/**"
-
-    @property
-    def tracks_key(self) -> str:
-        return f"{self.prefix}/tracks"
-
-    @property
-    def state_key(self) -> str:
-        return f"{self.prefix}/state/tracks"
-
-    @property
-    def alive_key(self) -> str:
-        return f"{self.prefix}/alive/{self.instance_id}"
-
-    def error_key(self, sensor_id: str) -> str:
-        return f"{self.prefix}/errors/{sensor_id}"
-
     # -- lifecycle --------------------------------------------------------------------------
 
     def open(self) -> None:
@@ -156,14 +112,14 @@ class ZenohIO:
         session = zenoh.open(conf)
         try:
             self._tracks_pub = session.declare_publisher(
-                self.tracks_key,
+                self.keys.tracks,
                 encoding=_JSON,
                 congestion_control=self._cc,
                 reliability=zenoh.Reliability.RELIABLE,
             )
-            self._queryable = session.declare_queryable(self.state_key, self._on_query)
-            self._token = session.liveliness().declare_token(self.alive_key)
-            self._subscriber = session.declare_subscriber(self.detections_key, self._on_sample)
+            self._queryable = session.declare_queryable(self.keys.state, self._on_query)
+            self._token = session.liveliness().declare_token(self.keys.alive(self.instance_id))
+            self._subscriber = session.declare_subscriber(self.keys.all_detections, self._on_sample)
         except BaseException:
             session.close()
             raise
@@ -175,7 +131,7 @@ class ZenohIO:
             session.zid(),
             self.listen if self.mode != "client" else [],
             self.connect,
-            self.detections_key,
+            self.keys.all_detections,
         )
 
     def stop_intake(self) -> None:
@@ -217,8 +173,7 @@ class ZenohIO:
     def _on_sample(self, sample: zenoh.Sample) -> None:
         try:
             payload = sample.payload.to_bytes()
-            key = str(sample.key_expr)
-            sensor = key.rsplit("/", 1)[-1]
+            sensor = Keys.last_chunk(str(sample.key_expr))
             self._submit(payload, sensor, "zenoh")
         except Exception:
             log.exception("could not take a detection batch")
@@ -235,7 +190,7 @@ class ZenohIO:
                 data = dumps(self._filtered(status, kinds))
             else:
                 data = self._report_bytes()
-            query.reply(self.state_key, data, encoding=_JSON)
+            query.reply(self.keys.state, data, encoding=_JSON)
         except Exception:
             log.exception("could not answer a query")
         finally:
@@ -253,4 +208,4 @@ class ZenohIO:
         session = self.session
         if self._closed or session is None:
             return
-        session.put(self.error_key(sensor_id), data, encoding=_JSON, congestion_control=self._cc)
+        session.put(self.keys.errors(sensor_id), data, encoding=_JSON, congestion_control=self._cc)

@@ -25,21 +25,51 @@ __all__ = [
 ]
 
 
-def _positive(name: str, value: float) -> None:
-    if not (isinstance(value, int | float) and math.isfinite(value) and value > 0):
-        raise ValueError(f"{name}: must be a finite number > 0, got {value!r}")
+def _field(
+    default: Any,
+    description: str,
+    *,
+    gt: float | None = None,
+    ge: float | None = None,
+    lt: float | None = None,
+    le: float | None = None,
+    choices: tuple[str, ...] | None = None,
+) -> Any:
+    """A config field with its default, its description and its bounds (or allowed values),
+    read by :func:`_check_bounds` and by whoever shows the configuration (the service derives
+    its document schema from them). A number outside its bounds is one the tracker cannot
+    run with, so every number has them."""
+    meta: dict[str, Any] = {"description": description}
+    for key, bound in (("gt", gt), ("ge", ge), ("lt", lt), ("le", le)):
+        if bound is not None:
+            meta[key] = bound
+    if choices is not None:
+        meta["choices"] = tuple(choices)
+    return field(default=default, metadata=meta)
 
 
-def _at_most(name: str, value: float, limit: float) -> None:
-    if value > limit:
-        raise ValueError(f"{name}: must be at most {limit:g}, got {value!r}")
+_BOUND_TEXT = {"gt": "> {}", "ge": ">= {}", "lt": "< {}", "le": "<= {}"}
+_BOUND_OK = {
+    "gt": lambda v, b: v > b,
+    "ge": lambda v, b: v >= b,
+    "lt": lambda v, b: v < b,
+    "le": lambda v, b: v <= b,
+}
 
 
-def _probability(name: str, value: float, *, include_one: bool = False) -> None:
-    ok = isinstance(value, int | float) and (0 < value <= 1 if include_one else 0 < value < 1)
-    if not ok:
-        interval = "(0, 1]" if include_one else "(0, 1)"
-        raise ValueError(f"{name}: must be in {interval}, got {value!r}")
+def _check_bounds(obj: Any, section: str) -> None:
+    """Raise ``ValueError`` naming ``section.field`` for a number (or a list item) that is not
+    a finite number within the field's bounds."""
+    for f in fields(obj):
+        bounds = [(k, f.metadata[k]) for k in _BOUND_TEXT if k in f.metadata]
+        if not bounds:
+            continue
+        value = getattr(obj, f.name)
+        for v in value if isinstance(value, tuple | list) else (value,):
+            ok = isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v)
+            if not (ok and all(_BOUND_OK[k](v, b) for k, b in bounds)):
+                want = " and ".join(_BOUND_TEXT[k].format(b) for k, b in bounds)
+                raise ValueError(f"{section}.{f.name}: must be a finite number {want}, got {v!r}")
 
 
 @dataclass(frozen=True)
@@ -54,14 +84,29 @@ class MotionConfig:
     ``π_jj = exp(−T/τ_j)``, the rest spread evenly over the other modes.
     """
 
-    models: tuple[str, ...] = ("cv", "ct")
-    q_cv: float = 0.5
-    q_ct: float = 2.0
-    q_turn_rate: float = 1e-3
-    sojourn_times: tuple[float, ...] = (30.0, 10.0)
-    initial_mode_probabilities: tuple[float, ...] = (0.9, 0.1)
+    models: tuple[str, ...] = _field(
+        ("cv", "ct"),
+        'the IMM modes: "cv" (nearly constant velocity) and/or "ct" (coordinated turn), in order',
+        choices=("cv", "ct"),
+    )
+    q_cv: float = _field(
+        0.5, "acceleration noise PSD of the constant-velocity mode, m²/s³", gt=0, le=1e4
+    )
+    q_ct: float = _field(
+        2.0, "acceleration noise PSD of the coordinated-turn mode, m²/s³", gt=0, le=1e4
+    )
+    q_turn_rate: float = _field(
+        1e-3, "turn-rate noise PSD of the coordinated-turn mode, rad²/s³", gt=0, le=1.0
+    )
+    sojourn_times: tuple[float, ...] = _field(
+        (30.0, 10.0), "mean time spent in each mode, s (one per model)", gt=0, le=1e6
+    )
+    initial_mode_probabilities: tuple[float, ...] = _field(
+        (0.9, 0.1), "a new track's mode probabilities (one per model, summing to 1)", ge=0, le=1
+    )
 
     def __post_init__(self) -> None:
+        _check_bounds(self, "motion")
         models = tuple(self.models)
         object.__setattr__(self, "models", models)
         object.__setattr__(self, "sojourn_times", tuple(float(t) for t in self.sojourn_times))
@@ -72,13 +117,8 @@ class MotionConfig:
         )
         if not models or len(set(models)) != len(models) or not set(models) <= {"cv", "ct"}:
             raise ValueError(f"motion.models: a non-empty subset of ('cv', 'ct'), got {models!r}")
-        _positive("motion.q_cv", self.q_cv)
-        _positive("motion.q_ct", self.q_ct)
-        _positive("motion.q_turn_rate", self.q_turn_rate)
         if len(self.sojourn_times) != len(models):
             raise ValueError("motion.sojourn_times: one per model")
-        for t in self.sojourn_times:
-            _positive("motion.sojourn_times", t)
         mu = self.initial_mode_probabilities
         if len(mu) != len(models) or any(not (0 <= p <= 1) for p in mu) or abs(sum(mu) - 1) > 1e-9:
             raise ValueError(
@@ -90,10 +130,12 @@ class MotionConfig:
 class MeasurementConfig:
     """``position_std`` (m): the position noise used when neither detection nor batch has a cov."""
 
-    position_std: float = 10.0
+    position_std: float = _field(
+        10.0, "position noise per axis, m, of detections that carry no covariance", ge=1e-3, le=1e5
+    )
 
     def __post_init__(self) -> None:
-        _positive("measurement.position_std", self.position_std)
+        _check_bounds(self, "measurement")
 
 
 INITIATION_METHODS = ("two_point", "single_point")
@@ -120,28 +162,35 @@ class InitiationConfig:
     Either way a new track has turn rate 0 with std ``turn_rate_std`` (rad/s).
     """
 
-    method: str = "two_point"
-    max_speed: float = 700.0
-    velocity_std: float = 15.0
-    slow_target_fraction: float = 0.8
-    turn_rate_std: float = 0.05
-    candidate_max_age: float = 12.0
-    max_pairs_per_candidate: int = 8
+    method: str = _field(
+        "two_point",
+        'how tracks start: "two_point" (velocity-gated pairs) or "single_point"',
+        choices=INITIATION_METHODS,
+    )
+    max_speed: float = _field(700.0, "fastest target a two-point start covers, m/s", gt=0, le=1e5)
+    velocity_std: float = _field(
+        15.0,
+        "velocity std per axis of slow targets (and of single-point starts), m/s",
+        ge=1e-3,
+        le=1e5,
+    )
+    slow_target_fraction: float = _field(
+        0.8, "prior probability that a new target is slow", gt=0, lt=1
+    )
+    turn_rate_std: float = _field(0.05, "a new track's turn-rate std, rad/s", gt=0, le=10.0)
+    candidate_max_age: float = _field(
+        12.0, "how long a lone detection waits for a second one, s", gt=0, le=3600.0
+    )
+    max_pairs_per_candidate: int = _field(
+        8, "most tracks one candidate starts in a scan (the likeliest)", ge=1, le=1000
+    )
 
     def __post_init__(self) -> None:
+        _check_bounds(self, "initiation")
         if self.method not in INITIATION_METHODS:
             raise ValueError(
                 f"initiation.method: one of {list(INITIATION_METHODS)}, got {self.method!r}"
             )
-        _positive("initiation.max_speed", self.max_speed)
-        _at_most("initiation.max_speed", self.max_speed, 1e5)
-        _positive("initiation.velocity_std", self.velocity_std)
-        _at_most("initiation.velocity_std", self.velocity_std, 1e5)
-        _probability("initiation.slow_target_fraction", self.slow_target_fraction)
-        _positive("initiation.turn_rate_std", self.turn_rate_std)
-        _at_most("initiation.turn_rate_std", self.turn_rate_std, 10.0)
-        _positive("initiation.candidate_max_age", self.candidate_max_age)
-        _at_most("initiation.candidate_max_age", self.candidate_max_age, 3600.0)
         n = self.max_pairs_per_candidate
         if not (isinstance(n, int) and not isinstance(n, bool) and 1 <= n <= 1000):
             raise ValueError(
@@ -154,10 +203,12 @@ class GatingConfig:
     """Chi-square gate on the innovation, two degrees of freedom: a true detection falls in it
     with probability ``gate_probability``."""
 
-    gate_probability: float = 0.9999
+    gate_probability: float = _field(
+        0.9999, "probability that a true detection falls in the chi-square gate", gt=0, le=1 - 1e-12
+    )
 
     def __post_init__(self) -> None:
-        _probability("gating.gate_probability", self.gate_probability)
+        _check_bounds(self, "gating")
 
     @property
     def threshold(self) -> float:
@@ -177,22 +228,25 @@ class TrackManagementConfig:
     ``max_coast_time`` seconds.
     """
 
-    pd: float = 0.9
-    clutter_density: float = 1e-6
-    new_target_density: float = 1e-7
-    p_false_confirm: float = 1e-5
-    p_true_delete: float = 1e-3
-    delete_drop_from_peak: float = 15.0
-    max_coast_time: float = 10.0
+    pd: float = _field(0.9, "detection probability, when a batch carries none", gt=0, le=1)
+    clutter_density: float = _field(
+        1e-6, "false-alarm density per m², when a batch carries none", gt=0, le=1.0
+    )
+    new_target_density: float = _field(1e-7, "new-target density per m² per scan", gt=0, le=1.0)
+    p_false_confirm: float = _field(1e-5, "α: probability of confirming a false track", gt=0, lt=1)
+    p_true_delete: float = _field(1e-3, "β: probability of deleting a true track", gt=0, lt=1)
+    delete_drop_from_peak: float = _field(
+        15.0,
+        "a confirmed track is deleted when its score falls this far below its peak",
+        gt=0,
+        le=1e6,
+    )
+    max_coast_time: float = _field(
+        10.0, "a confirmed track is deleted after this long without a detection, s", gt=0, le=1e6
+    )
 
     def __post_init__(self) -> None:
-        _probability("track_management.pd", self.pd, include_one=True)
-        _positive("track_management.clutter_density", self.clutter_density)
-        _positive("track_management.new_target_density", self.new_target_density)
-        _probability("track_management.p_false_confirm", self.p_false_confirm)
-        _probability("track_management.p_true_delete", self.p_true_delete)
-        _positive("track_management.delete_drop_from_peak", self.delete_drop_from_peak)
-        _positive("track_management.max_coast_time", self.max_coast_time)
+        _check_bounds(self, "track_management")
         if self.confirm_threshold <= self.delete_threshold:
             raise ValueError("track_management: confirmation threshold must exceed deletion's")
 
@@ -216,7 +270,9 @@ class AssociationConfig:
     """``method``: the point tracker, ``"gnn"`` (global nearest neighbour over independent
     clusters, confirmed tracks first)."""
 
-    method: str = "gnn"
+    method: str = _field(
+        "gnn", 'the point tracker: "gnn" (global nearest neighbour)', choices=ASSOCIATION_METHODS
+    )
 
     def __post_init__(self) -> None:
         if self.method not in ASSOCIATION_METHODS:

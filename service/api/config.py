@@ -16,8 +16,7 @@ from fastapi.concurrency import run_in_threadpool
 from fastapi.responses import Response
 
 from service.api.deps import EngineDep, FastJSONResponse, WriteAccess
-from service.engine import ConfigError
-from service.schemas import ConfigDocument
+from service.config_tree import ConfigDocument, ConfigError
 
 __all__ = ["router"]
 

@@ -38,7 +38,7 @@ async def stats(stats: StatsDep) -> Response:
 
 @router.get(
     "/metrics",
-    summary="The counters in Prometheus text format",
+    summary="Counters, gauges and histograms in Prometheus text format",
     response_class=Response,
     responses={200: {"content": {_PROMETHEUS: {}}}},
 )

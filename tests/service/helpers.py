@@ -1,18 +1,24 @@
-"""Helpers of the service tests: collecting Zenoh samples, waiting, checking reports."""
+"""Helpers of the service tests: collecting Zenoh samples and reports, waiting, checking
+reports, feeding an engine."""
 
 from __future__ import annotations
 
 import math
+import re
 import threading
 import time
 from collections.abc import Callable
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import orjson
 import zenoh
 
 from service.schemas import TrackOut, TrackReportOut
+
+if TYPE_CHECKING:
+    from service.engine import Engine
+    from service.ingest import IngestResult
 
 TRACK_REQUIRED: dict[str, type | tuple[type, ...]] = {
     "id": str,
@@ -152,3 +158,66 @@ def match_truth(
         used_g.add(int(j))
         errors.append(float(d[i, j]))
     return len(used_g), errors
+
+
+class ListSink:
+    """A report sink that keeps every report, decoded."""
+
+    def __init__(self) -> None:
+        self.tracks: list[dict[str, Any]] = []
+        self.errors: list[tuple[str, dict[str, Any]]] = []
+        self._lock = threading.Lock()
+
+    def publish_tracks(self, data: bytes) -> None:
+        with self._lock:
+            self.tracks.append(orjson.loads(data))
+
+    def publish_error(self, sensor_id: str, data: bytes) -> None:
+        with self._lock:
+            self.errors.append((sensor_id, orjson.loads(data)))
+
+
+def batch_payload(scan: Any, **changes: Any) -> bytes:
+    """A simulated scan as a Detection batch's JSON, with some fields changed."""
+    return orjson.dumps({**scan.to_batch(), **changes})
+
+
+def run_batches(
+    engine: Engine, payloads: list[bytes], key: str | None = "radar-1"
+) -> list[IngestResult]:
+    """Submit ``payloads`` and wait for what became of each."""
+    futures = [engine.submit(p, key, "test") for p in payloads]
+    return [f.result(timeout=30) for f in futures]
+
+
+_LABEL = r'[a-zA-Z_][a-zA-Z0-9_]*="(?:[^"\\\n]|\\[\\"n])*"'
+PROM_LINE = re.compile(
+    rf"^(?P<name>[a-zA-Z_:][a-zA-Z0-9_:]*)(\{{(?P<labels>{_LABEL}(,{_LABEL})*)\}})? "
+    r"(?P<value>\S+)$"
+)
+
+
+def parse_prometheus(text: str) -> dict[str, float]:
+    """A strict little parser of the text format: HELP/TYPE before samples, valid names."""
+    samples: dict[str, float] = {}
+    typed: dict[str, str] = {}
+    for line in text.splitlines():
+        if not line:
+            continue
+        if line.startswith("# HELP "):
+            continue
+        if line.startswith("# TYPE "):
+            _, _, name, kind = line.split(" ", 3)
+            assert kind in ("counter", "gauge", "summary", "histogram", "untyped"), line
+            typed[name] = kind
+            continue
+        assert not line.startswith("#"), line
+        m = PROM_LINE.match(line)
+        assert m, f"not a sample line: {line!r}"
+        name = m["name"]
+        base = re.sub(r"_(sum|count|bucket)$", "", name)
+        assert name in typed or base in typed, f"{name} has no TYPE"
+        if typed.get(name) == "counter":
+            assert name.endswith("_total"), name
+        samples[name + ((m["labels"] and "{" + m["labels"] + "}") or "")] = float(m["value"])
+    return samples

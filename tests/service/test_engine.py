@@ -1,5 +1,5 @@
-"""The engine with the real tracking pipeline: reports, refusals, reordering, configuration,
-overload and stopping (no network; reports go to a list)."""
+"""The engine with the real tracking pipeline: reports, bad input, configuration applied on the
+next batch, overload, stopping and failures (no network; reports go to a list)."""
 
 from __future__ import annotations
 
@@ -12,70 +12,22 @@ import numpy as np
 import orjson
 import pytest
 
-from clients.scenarios.multitarget import reference_scenario, simulate
-from service.engine import (
-    ConfigError,
-    Engine,
-    IngestResult,
-    load_config_file,
-    merge_patch,
-)
+from service.config_store import load_config_file
+from service.config_tree import ConfigError
+from service.engine import Engine
+from service.ingest import IngestResult
 from service.schemas import IngestConfig
 from trackers.config import TrackerConfig
 from trackers.pipeline import TrackingPipeline
 from trackers.types import Scan, StepResult
 
-from .helpers import check_report, match_truth
+from .helpers import ListSink, batch_payload, check_report, match_truth, run_batches
 
 pytestmark = pytest.mark.timeout(120)
 
 
-class ListSink:
-    def __init__(self) -> None:
-        self.tracks: list[dict[str, Any]] = []
-        self.errors: list[tuple[str, dict[str, Any]]] = []
-        self._lock = threading.Lock()
-
-    def publish_tracks(self, data: bytes) -> None:
-        with self._lock:
-            self.tracks.append(orjson.loads(data))
-
-    def publish_error(self, sensor_id: str, data: bytes) -> None:
-        with self._lock:
-            self.errors.append((sensor_id, orjson.loads(data)))
-
-
-@pytest.fixture(scope="module")
-def scans() -> list[Any]:
-    return simulate(reference_scenario(3))
-
-
-@pytest.fixture
-def sink() -> ListSink:
-    return ListSink()
-
-
-@pytest.fixture
-def engine(sink: ListSink) -> Any:
-    eng = Engine(sink=sink)
-    eng.start()
-    try:
-        yield eng
-    finally:
-        eng.stop()
-
-
-def _payload(scan: Any, **changes: Any) -> bytes:
-    return orjson.dumps({**scan.to_batch(), **changes})
-
-
-def _run(engine: Engine, payloads: list[bytes], key: str | None = "radar-1") -> list[IngestResult]:
-    futures = [engine.submit(p, key, "test") for p in payloads]
-    return [f.result(timeout=30) for f in futures]
-
-
 def test_reports_follow_the_truth(engine: Engine, sink: ListSink, scans: list[Any]) -> None:
-    results = _run(engine, [_payload(s) for s in scans[:30]])
+    results = run_batches(engine, [batch_payload(s) for s in scans[:30]])
     assert [r.seq for r in results] == list(range(1, 31))
     assert [r["seq"] for r in sink.tracks] == list(range(1, 31))
     last = sink.tracks[-1]
@@ -91,21 +43,6 @@ def test_reports_follow_the_truth(engine: Engine, sink: ListSink, scans: list[An
     assert stats["detections_processed"] == sum(s.z.shape[0] for s in scans[:30])
     assert stats["processing_ms"]["window"] == 30
     assert stats["tracks_confirmed"] == len(last["tracks"])
-
-
-def test_all_tracks_and_lookup_include_tentative(engine: Engine, scans: list[Any]) -> None:
-    _run(engine, [_payload(s) for s in scans[:6]])
-    every = engine.tracks("all")["tracks"]
-    confirmed = engine.tracks("confirmed")["tracks"]
-    tentative = engine.tracks("tentative")["tracks"]
-    assert len(every) == len(confirmed) + len(tentative)
-    assert tentative, "clutter should leave tentative tracks"
-    assert all(t["status"] == "tentative" for t in tentative)
-    assert engine.track(tentative[0]["id"]) == tentative[0]
-    assert engine.track(confirmed[0]["id"]) == confirmed[0]
-    assert engine.track("nope") is None
-    assert engine.tracks("all", {"formation"})["tracks"] == []
-    assert engine.tracks("all", {"individual"})["tracks"] == every
 
 
 BAD_INPUTS: list[tuple[str, Any, str | None]] = [
@@ -144,7 +81,7 @@ BAD_INPUTS: list[tuple[str, Any, str | None]] = [
 def test_bad_input_changes_nothing(
     engine: Engine, sink: ListSink, scans: list[Any], reason: str, payload: bytes, key: str
 ) -> None:
-    _run(engine, [_payload(s) for s in scans[:5]])
+    run_batches(engine, [batch_payload(s) for s in scans[:5]])
     before = engine.latest_report_bytes()
     before_all = engine.tracks("all")
     result = engine.submit(payload, key, "test").result(timeout=10)
@@ -157,101 +94,8 @@ def test_bad_input_changes_nothing(
     assert engine.tracks("all") == before_all
     assert engine.stats.snapshot()["rejected_by_reason"] == {reason: 1}
     # the next good batch is processed as if nothing had happened
-    good = engine.submit(_payload(scans[5]), "radar-1", "test").result(timeout=10)
+    good = engine.submit(batch_payload(scans[5]), "radar-1", "test").result(timeout=10)
     assert good.accepted and good.seq == 6
-
-
-def test_error_report_names_what_it_can(engine: Engine, sink: ListSink) -> None:
-    r = engine.submit(b'{"sensor_id": "s-9", "time": 4.0, "detections": 3}', None, "rest")
-    err = r.result(timeout=10).error
-    assert err is not None
-    assert (err["sensor_id"], err["time"], err["error"]) == ("s-9", 4.0, "invalid_batch")
-    assert err["detail"] == "detections: not a list"
-    r = engine.submit(b"\xff\xfe garbage", None, "rest")
-    err = r.result(timeout=10).error
-    assert err is not None and err["sensor_id"] == "unknown" and err["time"] is None
-    # NaN is no JSON, but the report still names the sensor and the time
-    nan = b'{"sensor_id": "s-9", "time": 5.0, "detections": [{"x": NaN, "y": 1.0}]}'
-    err = engine.submit(nan, None, "rest").result(timeout=10).error
-    assert err is not None
-    assert (err["sensor_id"], err["time"], err["error"]) == ("s-9", 5.0, "invalid_batch")
-    assert err["detail"] == "detections[0].x: not a finite number"
-
-
-def test_a_time_far_ahead_is_refused_and_blocks_nothing(
-    engine: Engine, sink: ListSink, scans: list[Any]
-) -> None:
-    """A clock gone wrong (nanoseconds for seconds) would put every later batch out of
-    sequence; it is refused, and the right times go on."""
-    _run(engine, [_payload(s) for s in scans[:3]])
-    before = engine.latest_report_bytes()
-    bad = engine.submit(_payload(scans[3], time=1.7e18), "radar-1", "t").result(timeout=10)
-    assert bad.error is not None and bad.error["error"] == "time_jump"
-    assert "ingest.max_time_jump = 3600.0 s" in bad.error["detail"]
-    assert engine.latest_report_bytes() == before
-    assert all(r.accepted for r in _run(engine, [_payload(s) for s in scans[3:6]]))
-    # a jump within max_time_jump is a pause, not an error
-    later = engine.submit(_payload(scans[6], time=scans[5].time + 3000.0), "radar-1", "t")
-    assert later.result(timeout=10).accepted
-
-
-def test_max_time_jump_counts_the_wall_time_waited(sink: ListSink, scans: list[Any]) -> None:
-    eng = Engine(sink=sink, ingest=IngestConfig(max_time_jump=1.0))
-    eng.start()
-    try:
-        _run(eng, [_payload(scans[0])])
-        r = eng.submit(_payload(scans[1], time=scans[0].time + 5.0), "radar-1", "t")
-        assert r.result(timeout=10).error["error"] == "time_jump"  # type: ignore[index]
-        time.sleep(0.5)  # 5 s ahead after 0.5 s of waiting: still too far
-        r = eng.submit(_payload(scans[1], time=scans[0].time + 5.0), "radar-1", "t")
-        assert r.result(timeout=10).error["error"] == "time_jump"  # type: ignore[index]
-        r = eng.submit(_payload(scans[1], time=scans[0].time + 1.4), "radar-1", "t")
-        assert r.result(timeout=10).accepted
-    finally:
-        eng.stop()
-
-
-def test_too_many_detections(sink: ListSink, scans: list[Any]) -> None:
-    eng = Engine(sink=sink, ingest=IngestConfig(max_detections_per_batch=3))
-    eng.start()
-    try:
-        r = eng.submit(_payload(scans[0]), "radar-1", "test").result(timeout=10)
-        assert r.error is not None and r.error["error"] == "too_many_detections"
-        assert "more than ingest.max_detections_per_batch = 3" in r.error["detail"]
-        assert eng.seq == 0
-    finally:
-        eng.stop()
-
-
-def test_reorder_window_puts_late_batches_in_order(sink: ListSink, scans: list[Any]) -> None:
-    eng = Engine(sink=sink, ingest=IngestConfig(reorder_window=1.5))
-    eng.start()
-    try:
-        order = [0, 2, 1, 3, 5, 4, 6, 7]
-        futures = [eng.submit(_payload(scans[i]), "radar-1", "t") for i in order]
-        # held batches wait for newer times, or W seconds of wall time
-        results = [f.result(timeout=10) for f in futures]
-        assert all(r.accepted for r in results), [r.error for r in results]
-        assert [r["time"] for r in sink.tracks] == [float(i) for i in range(8)]
-        # older than the last processed time: still out of sequence
-        late = eng.submit(_payload(scans[2]), "radar-1", "t").result(timeout=10)
-        assert late.error is not None and late.error["error"] == "out_of_sequence"
-    finally:
-        eng.stop()
-
-
-def test_reorder_window_releases_after_wall_time(sink: ListSink, scans: list[Any]) -> None:
-    eng = Engine(sink=sink, ingest=IngestConfig(reorder_window=0.3))
-    eng.start()
-    try:
-        t0 = time.monotonic()
-        fut = eng.submit(_payload(scans[0]), "radar-1", "t")
-        time.sleep(0.1)
-        assert not fut.done() and eng.stats.snapshot()["held_for_reorder"] == 1
-        assert fut.result(timeout=5).accepted
-        assert 0.25 <= time.monotonic() - t0 < 2.0
-    finally:
-        eng.stop()
 
 
 def test_config_patch_applies_on_next_batch_and_saves(
@@ -261,7 +105,7 @@ def test_config_patch_applies_on_next_batch_and_saves(
     eng = Engine(sink=sink, config_file=path)
     eng.start()
     try:
-        _run(eng, [_payload(scans[0])])
+        run_batches(eng, [batch_payload(scans[0])])
         doc = eng.patch_config(
             {"measurement": {"position_std": 7.0}, "ingest": {"max_detections_per_batch": 5}}
         )
@@ -270,7 +114,7 @@ def test_config_patch_applies_on_next_batch_and_saves(
         assert orjson.loads(path.read_bytes()) == doc
         loaded = load_config_file(path, IngestConfig())
         assert loaded is not None and loaded[0].measurement.position_std == 7.0
-        r = eng.submit(_payload(scans[1]), "radar-1", "t").result(timeout=10)
+        r = eng.submit(batch_payload(scans[1]), "radar-1", "t").result(timeout=10)
         assert r.error is not None and r.error["error"] == "too_many_detections"
         assert eng._pipeline.config.measurement.position_std == 7.0
         # invalid: nothing changes, not even the file
@@ -297,13 +141,6 @@ def test_config_patch_applies_on_next_batch_and_saves(
         eng.stop()
 
 
-def test_merge_patch() -> None:
-    assert merge_patch({"a": {"b": 1, "c": 2}}, {"a": {"b": None, "d": 3}}) == {
-        "a": {"c": 2, "d": 3}
-    }
-    assert merge_patch({"a": 1}, {"a": [1, 2]}) == {"a": [1, 2]}
-
-
 class SlowPipeline(TrackingPipeline):
     """The real pipeline, made slow to fill the queue."""
 
@@ -316,7 +153,7 @@ def test_overload_drops_are_counted_and_reported(sink: ListSink, scans: list[Any
     eng = Engine(sink=sink, queue_size=1, put_timeout=0.05, pipeline_factory=SlowPipeline)
     eng.start()
     try:
-        futures = [eng.submit(_payload(s), "radar-1", "t") for s in scans[:5]]
+        futures = [eng.submit(batch_payload(s), "radar-1", "t") for s in scans[:5]]
         results = [f.result(timeout=10) for f in futures]
         dropped = [r for r in results if r.error and r.error["error"] == "overloaded"]
         assert dropped, "a 1-slot queue behind a slow tracker must overflow"
@@ -332,7 +169,7 @@ def test_overload_drops_are_counted_and_reported(sink: ListSink, scans: list[Any
 def test_stop_is_quick_and_final(sink: ListSink, scans: list[Any]) -> None:
     eng = Engine(sink=sink, pipeline_factory=SlowPipeline, stop_drain_seconds=0.3)
     eng.start()
-    futures = [eng.submit(_payload(s), "radar-1", "t") for s in scans[:20]]
+    futures = [eng.submit(batch_payload(s), "radar-1", "t") for s in scans[:20]]
     time.sleep(0.05)
     t0 = time.monotonic()
     eng.stop()
@@ -341,7 +178,7 @@ def test_stop_is_quick_and_final(sink: ListSink, scans: list[Any]) -> None:
     results = [f.result(timeout=1) for f in futures]  # every future resolved
     assert any(r.accepted for r in results)
     assert any(r.error and r.error["error"] == "overloaded" for r in results)
-    after = eng.submit(_payload(scans[25]), "radar-1", "t").result(timeout=1)
+    after = eng.submit(batch_payload(scans[25]), "radar-1", "t").result(timeout=1)
     assert after.error is not None and after.error["error"] == "overloaded"
 
 
@@ -352,7 +189,9 @@ def test_concurrent_submitters(engine: Engine, scans: list[Any]) -> None:
 
     def send(part: list[Any]) -> None:
         for s in part:
-            r = engine.submit(_payload(s, sensor_id=f"s{threading.get_ident() % 1000}"), None, "t")
+            r = engine.submit(
+                batch_payload(s, sensor_id=f"s{threading.get_ident() % 1000}"), None, "t"
+            )
             with lock:
                 results.append(r.result(timeout=30))
 
@@ -387,13 +226,13 @@ def test_a_failure_between_batches_refuses_the_batch_and_the_worker_survives(
     eng = Engine(sink=sink, pipeline_factory=UnconfigurablePipeline)
     eng.start()
     try:
-        assert _run(eng, [_payload(scans[0])])[0].accepted
+        assert run_batches(eng, [batch_payload(scans[0])])[0].accepted
         eng.patch_config({"track_management": {"pd": 0.8}})
-        r = _run(eng, [_payload(scans[1])])[0]
+        r = run_batches(eng, [batch_payload(scans[1])])[0]
         assert r.error is not None and r.error["error"] == "internal_error"
         assert "cannot reconfigure" in r.error["detail"]
         assert eng.running
-        assert _run(eng, [_payload(scans[2])])[0].accepted
+        assert run_batches(eng, [batch_payload(scans[2])])[0].accepted
     finally:
         eng.stop()
 
@@ -404,7 +243,7 @@ def test_a_tracker_failure_is_reported_and_the_worker_survives(
     eng = Engine(sink=sink, pipeline_factory=BrokenPipeline)
     eng.start()
     try:
-        results = _run(eng, [_payload(s) for s in scans[:6]])
+        results = run_batches(eng, [batch_payload(s) for s in scans[:6]])
         assert [r.accepted for r in results] == [True, True, True, False, True, True]
         err = results[3].error
         assert err is not None and err["error"] == "internal_error" and "boom" in err["detail"]

@@ -5,7 +5,6 @@ liveliness token and REST; bad input; configuration; metrics."""
 from __future__ import annotations
 
 import json
-import re
 from typing import Any
 
 import httpx
@@ -24,6 +23,7 @@ from .helpers import (
     check_track,
     declare_publisher,
     match_truth,
+    parse_prometheus,
     wait_until,
 )
 
@@ -196,9 +196,9 @@ def test_bad_input_over_zenoh_is_reported_and_changes_nothing(
             _publish(peer, SCANS[8:9])
             reports.wait_for(9)
             assert reports.json()[-1]["seq"] == 9
-            metrics = http.get("/metrics").text
-            assert 'tracker_batches_rejected_total{reason="invalid_batch"} 4' in metrics
-            assert "tracker_batches_processed_total 9" in metrics
+            metrics = parse_prometheus(http.get("/metrics").text)
+            assert metrics['tracker_batches_rejected_total{reason="invalid_batch"}'] == 4
+            assert metrics["tracker_batches_processed_total"] == 9
     finally:
         errors.close()
         reports.close()
@@ -317,39 +317,6 @@ def test_rest_config(service: RunningService, peer: zenoh.Session) -> None:
         errors.close()
 
 
-_LABEL = r'[a-zA-Z_][a-zA-Z0-9_]*="(?:[^"\\\n]|\\[\\"n])*"'
-PROM_LINE = re.compile(
-    rf"^(?P<name>[a-zA-Z_:][a-zA-Z0-9_:]*)(\{{(?P<labels>{_LABEL}(,{_LABEL})*)\}})? "
-    r"(?P<value>\S+)$"
-)
-
-
-def parse_prometheus(text: str) -> dict[str, float]:
-    """A strict little parser of the text format: HELP/TYPE before samples, valid names."""
-    samples: dict[str, float] = {}
-    typed: dict[str, str] = {}
-    for line in text.splitlines():
-        if not line:
-            continue
-        if line.startswith("# HELP "):
-            continue
-        if line.startswith("# TYPE "):
-            _, _, name, kind = line.split(" ", 3)
-            assert kind in ("counter", "gauge", "summary", "histogram", "untyped"), line
-            typed[name] = kind
-            continue
-        assert not line.startswith("#"), line
-        m = PROM_LINE.match(line)
-        assert m, f"not a sample line: {line!r}"
-        name = m["name"]
-        base = re.sub(r"_(sum|count)$", "", name)
-        assert name in typed or base in typed, f"{name} has no TYPE"
-        if typed.get(name) == "counter":
-            assert name.endswith("_total"), name
-        samples[name + ((m["labels"] and "{" + m["labels"] + "}") or "")] = float(m["value"])
-    return samples
-
-
 def test_health_metrics_and_docs(service: RunningService, peer: zenoh.Session) -> None:
     _publish(peer, SCANS[:3])
     wait_until(lambda: service.engine.seq == 3)
@@ -361,7 +328,9 @@ def test_health_metrics_and_docs(service: RunningService, peer: zenoh.Session) -
         assert samples["tracker_batches_received_total"] == 3
         assert samples["tracker_batches_processed_total"] == 3
         assert samples["tracker_processing_seconds_count"] == 3
-        assert samples['tracker_processing_seconds{quantile="0.99"}'] > 0
+        assert samples['tracker_processing_seconds_bucket{le="+Inf"}'] == 3
+        assert samples["tracker_processing_seconds_sum"] > 0
+        assert samples["tracker_batch_detections_count"] == 3
         assert samples['tracker_tracks{status="confirmed"}'] >= 0
         spec = http.get("/openapi.json").json()
         for path in (
@@ -383,6 +352,9 @@ def test_health_metrics_and_docs(service: RunningService, peer: zenoh.Session) -
             "ConfigDocument",
         ):
             assert name in schemas, name
+        # The configuration document is typed down to each tracker field, from one tree.
+        assert schemas["InitiationSection"]["properties"]["max_speed"]["default"] == 700.0
+        assert schemas["ConfigDocument"]["additionalProperties"] is False
         assert json.dumps(spec).count("#/components/schemas/") > 5
         assert http.get("/docs").status_code == 200
 

@@ -1,13 +1,14 @@
-"""Counters, percentiles over the last 2048 batches, and the Prometheus text."""
+"""Counters, gauges and histograms through prometheus_client; the JSON document with its
+percentiles over the last 2048 batches; one registry per instance."""
 
 from __future__ import annotations
 
 import numpy as np
 
 from service.schemas import ERROR_REASONS
-from service.stats import WINDOW, Stats
+from service.stats import BATCH_SIZE_BUCKETS, PROCESSING_BUCKETS, WINDOW, Stats
 
-from .test_integration import parse_prometheus
+from .helpers import parse_prometheus
 
 
 def test_percentiles_over_a_sliding_window() -> None:
@@ -21,6 +22,11 @@ def test_percentiles_over_a_sliding_window() -> None:
     assert pct["p50"] == round(float(np.percentile(recent, 50)), 4)
     assert pct["p99"] == round(float(np.percentile(recent, 99)), 4)
     assert pct["max"] == 99.0  # the 1000 ms batches slid out
+    # the histogram keeps every batch
+    samples = parse_prometheus(stats.prometheus().decode())
+    assert samples["tracker_processing_seconds_count"] == 3000
+    assert samples['tracker_processing_seconds_bucket{le="0.5"}'] == 3000 - 952
+    assert samples['tracker_processing_seconds_bucket{le="+Inf"}'] == 3000
 
 
 def test_snapshot_and_prometheus() -> None:
@@ -33,11 +39,13 @@ def test_snapshot_and_prometheus() -> None:
     stats.dropped()
     stats.processed(1, 2.0, 7, 1.5, 4)
     stats.tracks_tentative = lambda: 9
+    stats.queue_depth = lambda: 3
     snap = stats.snapshot()
     assert snap["batches_received"] == 2 and snap["batches_rejected"] == 2
     assert snap["rejected_by_reason"] == {"invalid_batch": 2}
     assert snap["tracks_confirmed"] == 4 and snap["tracks_tentative"] == 9
-    samples = parse_prometheus(stats.prometheus())
+    assert (snap["seq"], snap["last_time"], snap["queue_depth"]) == (1, 2.0, 3)
+    samples = parse_prometheus(stats.prometheus().decode())
     assert samples["tracker_batches_received_total"] == 2
     assert samples['tracker_batches_rejected_total{reason="invalid_batch"}'] == 2
     # every reason has its series from the start, and no made-up ones
@@ -51,5 +59,39 @@ def test_snapshot_and_prometheus() -> None:
     assert samples["tracker_batches_dropped_total"] == 1
     assert samples["tracker_received_bytes_total"] == 150
     assert samples['tracker_tracks{status="tentative"}'] == 9
+    assert samples['tracker_tracks{status="confirmed"}'] == 4
+    assert samples["tracker_ingest_queue_depth"] == 3
+    assert samples["tracker_last_seq"] == 1
     assert samples["tracker_processing_seconds_sum"] == 0.0015
     assert samples['tracker_info{instance_id="odd\\"id"}'] == 1
+    assert not [k for k in samples if "_created" in k]
+
+
+def test_histograms_of_time_and_batch_size() -> None:
+    stats = Stats("x")
+    for n, ms in [(0, 0.2), (3, 0.7), (55, 1.5), (55, 30.0), (12000, 4000.0)]:
+        stats.processed(1, 1.0, n, ms, 0)
+    samples = parse_prometheus(stats.prometheus().decode())
+
+    def buckets(name: str, bounds: tuple[float, ...]) -> list[float]:
+        return [samples[f'{name}_bucket{{le="{float(b)}"}}'] for b in bounds] + [
+            samples[f'{name}_bucket{{le="+Inf"}}']
+        ]
+
+    assert buckets("tracker_processing_seconds", PROCESSING_BUCKETS) == [
+        1, 2, 3, 3, 3, 3, 4, 4, 4, 4, 4, 4, 5, 5
+    ]  # fmt: skip
+    assert buckets("tracker_batch_detections", BATCH_SIZE_BUCKETS) == [
+        1, 1, 2, 2, 2, 2, 4, 4, 4, 4, 4, 4, 4, 5
+    ]  # fmt: skip
+    assert samples["tracker_batch_detections_sum"] == 12113
+    assert samples["tracker_batch_detections_count"] == 5
+
+
+def test_each_instance_counts_apart() -> None:
+    a, b = Stats("a"), Stats("b")
+    a.received(10)
+    a.processed(1, 1.0, 5, 1.0, 2)
+    assert b.snapshot()["batches_received"] == 0 and b.snapshot()["batches_processed"] == 0
+    assert parse_prometheus(b.prometheus().decode())["tracker_batches_received_total"] == 0
+    assert parse_prometheus(a.prometheus().decode())["tracker_batches_received_total"] == 1

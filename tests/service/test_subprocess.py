@@ -313,6 +313,12 @@ def test_demo_shows_tracks_at_once(processes: list[ServiceProcess]) -> None:
     assert code == 0 and elapsed < 3.0
     assert "demo: publishing the reference scenario" in err
     assert re.search(r"demo: seq \d+ t=[\d.]+ s: \d+ confirmed tracks: T\d+ \(", err), err
+    # the demo is a client process of its own, stopped with the service
+    started = re.search(r"demo: started the demo client \(pid (\d+)\): -m clients\.demo ", err)
+    assert started, err
+    assert "demo: stopped after" in err and "Traceback" not in err
+    with pytest.raises(ProcessLookupError):
+        os.kill(int(started[1]), 0)
 
 
 def test_max_rate_publishing_loses_nothing_and_rest_keeps_answering(

@@ -1,9 +1,16 @@
 import json
 import re
+import warnings
+from dataclasses import fields, is_dataclass
+from typing import get_type_hints
 
+import numpy as np
 import pytest
 
+from clients.scenarios.multitarget import reference_scenario, simulate
 from trackers.config import TrackerConfig
+from trackers.pipeline import TrackingPipeline, check_scan
+from trackers.types import Scan
 
 
 def test_defaults_round_trip_through_json():
@@ -68,3 +75,67 @@ def test_integer_field_takes_an_integer_or_an_integral_number():
     c = TrackerConfig().merged({"initiation": {"max_pairs_per_candidate": 4.0}})
     assert c.initiation.max_pairs_per_candidate == 4
     assert isinstance(c.initiation.max_pairs_per_candidate, int)
+
+
+def _leaves(cls, prefix=""):
+    hints = get_type_hints(cls)
+    for f in fields(cls):
+        if is_dataclass(hints[f.name]):
+            yield from _leaves(hints[f.name], f"{prefix}{f.name}.")
+        else:
+            yield prefix + f.name, f
+
+
+def _at_bound(f, end):
+    """The field's value at its lowest or highest allowed end (just inside an open bound)."""
+    m = f.metadata
+    closed, open_ = ("ge", "gt") if end == "low" else ("le", "lt")
+    if closed in m:
+        return m[closed]
+    if open_ not in m:
+        return None
+    b = m[open_]
+    if end == "low":
+        return 1e-300 if b == 0 else b * (1 + 1e-9)
+    return b * (1 - 1e-9)
+
+
+BOUNDED = [
+    (path, end)
+    for path, f in _leaves(TrackerConfig)
+    for end in ("low", "high")
+    if _at_bound(f, end) is not None and not path.endswith("initial_mode_probabilities")
+]
+
+
+@pytest.mark.parametrize(("path", "end"), BOUNDED)
+def test_a_configuration_that_validates_is_one_the_tracker_runs(path, end):
+    """Every number at either end of its bounds: the tracker runs a scenario with finite
+    tracks, including detections whose covariance comes from ``measurement.position_std``."""
+    f = dict(_leaves(TrackerConfig))[path]
+    value = _at_bound(f, end)
+    section, name = path.split(".")
+    if name == "sojourn_times":
+        value = [value, value]
+    try:
+        config = TrackerConfig().merged({section: {name: value}})
+    except ValueError as exc:
+        assert "threshold" in str(exc)  # α, β near 1: the two thresholds cross
+        return
+    pipeline = TrackingPipeline(config)
+    std = config.measurement.position_std
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        for k, sim in enumerate(simulate(reference_scenario(0))[:10]):
+            scan = sim.to_scan()
+            if k % 2:  # as the service builds a batch without covariances
+                scan = Scan(
+                    scan.sensor_id,
+                    scan.time,
+                    scan.z,
+                    np.tile(std**2 * np.eye(2), (scan.size, 1, 1)),
+                )
+            check_scan(scan, pipeline.last_time)
+            for t in pipeline.process(scan).tracks:
+                assert np.isfinite(t.covariance).all() and np.isfinite(t.position).all()
+                assert np.isfinite(t.score)

@@ -1,0 +1,236 @@
+"""``python -m clients.demo``: a sensor and a reader in one, so a newcomer sees tracks at once.
+
+Examples::
+
+    python -m clients.demo                         # against a service on tcp/127.0.0.1:7447
+    python -m clients.demo -e tcp/10.0.0.5:7447 --summary-interval 2
+
+Publishes the reference scenario's batches over Zenoh in real time, as a sensor would,
+looping with shifted times so it never goes out of sequence (each loop starts after the
+service's latest report). Every ``--summary-interval`` seconds it asks the service's
+queryable ``{prefix}/state/tracks`` for the latest Track report and logs a one-line summary
+of the confirmed tracks. ``tracker-service --demo`` starts it as a child process connected to
+the service and stops it on shutdown. Runs until SIGINT or SIGTERM.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import math
+import os
+import signal
+import sys
+import threading
+import time
+from collections.abc import Sequence
+from typing import Any
+
+import orjson
+import zenoh
+
+from clients.scenarios.multitarget import reference_scenario, simulate
+from clients.zenoh_session import (
+    DEFAULT_ENDPOINT,
+    BatchPublisher,
+    add_zenoh_arguments,
+    session_from_args,
+)
+from service.keys import Keys
+
+__all__ = ["Demo", "build_parser", "latest_report", "main", "summary_line"]
+
+log = logging.getLogger("clients.demo")
+
+
+def summary_line(report: dict[str, Any], limit: int = 5) -> str:
+    """``seq 42 t=41.0 s: 48 confirmed tracks: T3 (120, -40) 5.1 m/s, ...``"""
+    tracks = report.get("tracks", [])
+    parts = []
+    for t in tracks[:limit]:
+        (x, y), (vx, vy) = t["position"], t["velocity"]
+        parts.append(f"{t['id']} ({x:.0f}, {y:.0f}) {math.hypot(vx, vy):.1f} m/s")
+    more = f", +{len(tracks) - limit} more" if len(tracks) > limit else ""
+    when = "-" if report.get("time") is None else f"{report['time']:.1f}"
+    return f"seq {report.get('seq', 0)} t={when} s: {len(tracks)} confirmed tracks" + (
+        ": " + ", ".join(parts) + more if parts else ""
+    )
+
+
+def latest_report(session: zenoh.Session, keys: Keys, timeout: float) -> dict[str, Any] | None:
+    """The service's latest Track report from its queryable; ``None`` when none answers."""
+    found: dict[str, Any] | None = None
+    for reply in session.get(keys.state, timeout=timeout):
+        if reply.ok is not None and found is None:
+            found = orjson.loads(reply.ok.payload.to_bytes())
+    return found
+
+
+class Demo:
+    """Publishes the reference scenario in real time until ``stop`` is set (or, with
+    ``parent``, until the process ``parent`` is no longer this process's parent)."""
+
+    def __init__(
+        self,
+        session: zenoh.Session,
+        keys: Keys,
+        *,
+        stop: threading.Event,
+        seed: int = 0,
+        speed: float = 1.0,
+        summary_interval: float = 5.0,
+        wait_matching: float = 5.0,
+        query_timeout: float = 2.0,
+        parent: int | None = None,
+    ) -> None:
+        self.session = session
+        self.keys = keys
+        self.publisher = BatchPublisher(session, keys.prefix, wait_matching=wait_matching)
+        self.seed = seed
+        self.speed = speed
+        self.summary_interval = summary_interval
+        self.query_timeout = query_timeout
+        self.parent = parent
+        self._stop = stop
+
+    @property
+    def published(self) -> int:
+        return self.publisher.published
+
+    def run(self) -> None:
+        scans = simulate(reference_scenario(self.seed))
+        if not scans:
+            return
+        first = scans[0].time
+        duration = scans[-1].time - first
+        dt = scans[1].time - scans[0].time if len(scans) > 1 else 1.0
+        next_summary = time.monotonic() + self.summary_interval
+        loop = 0
+        while not self._stopped():
+            offset = loop * (duration + dt)
+            report = latest_report(self.session, self.keys, self.query_timeout)
+            last = None if report is None else report.get("time")
+            if last is not None and first + offset <= last:
+                offset = last + dt - first
+            start_wall = time.monotonic()
+            for scan in scans:
+                due = start_wall + (scan.time - first) / self.speed
+                while True:
+                    now = time.monotonic()
+                    if now >= next_summary:
+                        self._log_summary()
+                        next_summary = time.monotonic() + self.summary_interval
+                        continue
+                    if now >= due:
+                        break
+                    if self._wait(min(due, next_summary) - now):
+                        return
+                batch = scan.to_batch()
+                batch["time"] = scan.time + offset
+                self.publisher.put(batch)
+            loop += 1
+
+    def close(self) -> None:
+        self.publisher.close()
+
+    def _log_summary(self) -> None:
+        report = latest_report(self.session, self.keys, self.query_timeout)
+        if report is None:
+            log.info("demo: no answer from %s", self.keys.state)
+        else:
+            log.info("demo: %s", summary_line(report))
+
+    def _stopped(self) -> bool:
+        if self.parent is not None and os.getppid() != self.parent:
+            self._stop.set()  # the service that started us is gone
+        return self._stop.is_set()
+
+    def _wait(self, seconds: float) -> bool:
+        """Wait up to ``seconds`` (half a second at most, to watch the parent); True to stop."""
+        self._stop.wait(max(0.0, min(seconds, 0.5)))
+        return self._stopped()
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="python -m clients.demo",
+        description=(
+            "Publish the reference scenario to the tracking service in real time and log a "
+            "summary of its confirmed tracks every few seconds."
+        ),
+    )
+    add_zenoh_arguments(parser)
+    parser.add_argument("--seed", type=int, default=0, help="scenario seed (default 0)")
+    parser.add_argument(
+        "--speed", type=float, default=1.0, help="times real time (default 1: real time)"
+    )
+    parser.add_argument(
+        "--summary-interval",
+        type=float,
+        default=5.0,
+        help="seconds between the one-line track summaries (default 5)",
+    )
+    parser.add_argument(
+        "--wait-matching",
+        type=float,
+        default=5.0,
+        help="seconds to wait for the service's subscriber before the first batch (default 5)",
+    )
+    parser.add_argument(
+        "--log-level",
+        choices=("critical", "error", "warning", "info", "debug"),
+        default="info",
+    )
+    parser.add_argument(
+        "--exit-with-parent",
+        action="store_true",
+        help="stop when the process that started this one is gone (as under tracker-service)",
+    )
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if not args.summary_interval > 0:
+        parser.error("--summary-interval: must be > 0")
+    if not args.speed > 0:
+        parser.error("--speed: must be > 0")
+    logging.basicConfig(
+        level=args.log_level.upper(),
+        format="%(asctime)s %(levelname)-7s %(name)s: %(message)s",
+        stream=sys.stderr,
+    )
+    stop = threading.Event()
+    parent = os.getppid() if args.exit_with_parent else None
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, lambda signum, frame: stop.set())
+    try:
+        session = session_from_args(args)
+    except zenoh.ZError as exc:
+        print(f"python -m clients.demo: cannot open a Zenoh session: {exc}", file=sys.stderr)
+        return 1
+    demo = Demo(
+        session,
+        Keys(args.prefix),
+        stop=stop,
+        seed=args.seed,
+        speed=args.speed,
+        summary_interval=args.summary_interval,
+        wait_matching=args.wait_matching,
+        parent=parent,
+    )
+    try:
+        log.info(
+            "demo: publishing the reference scenario to %s", args.connect or [DEFAULT_ENDPOINT]
+        )
+        demo.run()
+    finally:
+        demo.close()
+        session.close()
+    log.info("demo: stopped after %d batches", demo.published)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

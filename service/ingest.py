@@ -1,0 +1,247 @@
+"""What happens to a batch before the tracker: the edge checks (:func:`check_batch`), the
+time-jump guard (:func:`time_jump_detail`), the reorder window (:class:`ReorderBuffer`), and
+refusals (:class:`Refusals`: counted, reported, drops logged at most once a second).
+
+A refused batch gets an Error report naming its sensor and time where they can be read, even
+from a payload that failed validation (:func:`peek`).
+"""
+
+from __future__ import annotations
+
+import heapq
+import itertools
+import json
+import logging
+import math
+import threading
+import time
+from collections.abc import Iterator
+from concurrent.futures import Future
+from dataclasses import dataclass, field
+from typing import Any
+
+import orjson
+
+from service.reports import ReportOut, error_report_for
+from service.schemas import (
+    BatchError,
+    DetectionBatchIn,
+    IngestConfig,
+    decode_batch,
+    valid_sensor_id,
+)
+from service.stats import Stats
+
+__all__ = [
+    "IngestResult",
+    "Item",
+    "Refusals",
+    "ReorderBuffer",
+    "check_batch",
+    "peek",
+    "time_jump_detail",
+]
+
+log = logging.getLogger("service.ingest")
+
+
+@dataclass(frozen=True)
+class IngestResult:
+    """What became of one submitted batch: accepted with the Track report's ``seq``, or
+    refused with its Error report. ``seq`` is ``None`` while a batch is held for reordering
+    (never in a resolved future)."""
+
+    accepted: bool
+    seq: int | None = None
+    error: dict[str, Any] | None = None
+
+
+@dataclass
+class Item:
+    """One submitted batch on its way to the tracker. ``key_sensor_id``: the Zenoh key's last
+    chunk (``None`` over REST); ``batch``: the batch if the submitter validated it already."""
+
+    payload: bytes
+    key_sensor_id: str | None
+    source: str
+    future: Future[IngestResult]
+    batch: DetectionBatchIn | None = None
+    arrived: float = field(default_factory=time.monotonic)
+
+
+def check_batch(
+    payload: bytes, key_sensor_id: str | None, ingest: IngestConfig
+) -> DetectionBatchIn:
+    """Decode and validate one batch against the contract and the ingest limits; raise
+    :class:`~service.schemas.BatchError` when it is refused."""
+    batch = decode_batch(payload)
+    if key_sensor_id is not None and batch.sensor_id != key_sensor_id:
+        raise BatchError(
+            "sensor_mismatch",
+            f"sensor_id: {batch.sensor_id!r} differs from the key's last chunk {key_sensor_id!r}",
+        )
+    n = len(batch.detections)
+    if n > ingest.max_detections_per_batch:
+        raise BatchError(
+            "too_many_detections",
+            f"detections: {n} detections, more than ingest.max_detections_per_batch "
+            f"= {ingest.max_detections_per_batch}",
+        )
+    return batch
+
+
+def time_jump_detail(batch_time: float, last: float, max_jump: float, waited: float) -> str | None:
+    """Why a batch at ``batch_time`` is too far ahead of the last processed time ``last``, or
+    ``None`` when it is not. It may run ahead by the ``waited`` seconds of wall time since
+    ``last`` was processed plus ``max_jump``; further ahead, it would put every later batch
+    out of sequence."""
+    if batch_time - last <= max_jump + waited:
+        return None
+    return (
+        f"time {batch_time} is {batch_time - last:.6g} s after the last processed time {last}: "
+        f"more than ingest.max_time_jump = {max_jump} s plus the {waited:.3g} s of wall time "
+        "since"
+    )
+
+
+class ReorderBuffer:
+    """Valid batches held in time order. A batch goes once the newest batch time received,
+    minus the window ``W``, has passed it, or once one held batch has waited ``W`` seconds of
+    wall time (and with it everything older). Used by one thread (the worker)."""
+
+    def __init__(self) -> None:
+        self._heap: list[tuple[float, int, Item, DetectionBatchIn]] = []
+        self._counter = itertools.count()
+        self.newest_time = -math.inf
+
+    def __len__(self) -> int:
+        return len(self._heap)
+
+    def hold(self, item: Item, batch: DetectionBatchIn) -> None:
+        self.newest_time = max(self.newest_time, batch.time)
+        heapq.heappush(self._heap, (batch.time, next(self._counter), item, batch))
+
+    def wait_time(self, now: float, window: float) -> float | None:
+        """Seconds until the oldest arrival has waited ``window``; ``None`` when empty."""
+        if not self._heap:
+            return None
+        oldest_arrival = min(entry[2].arrived for entry in self._heap)
+        return max(0.0, oldest_arrival + window - now)
+
+    def due(self, now: float, window: float) -> Iterator[tuple[Item, DetectionBatchIn]]:
+        """The batches that may go now, in time order (all of them when ``window`` <= 0)."""
+        heap = self._heap
+        while heap:
+            t, _, item, batch = heap[0]
+            if window <= 0 or t <= self.newest_time - window:
+                heapq.heappop(heap)
+                yield item, batch
+                continue
+            expired = [e for e in heap if now - e[2].arrived >= window]
+            if not expired:
+                return
+            cutoff = max(e[0] for e in expired)
+            while heap and heap[0][0] <= cutoff:
+                _, _, held, held_batch = heapq.heappop(heap)
+                yield held, held_batch
+
+    def drain(self) -> Iterator[tuple[Item, DetectionBatchIn]]:
+        """Every held batch, in time order."""
+        while self._heap:
+            _, _, item, batch = heapq.heappop(self._heap)
+            yield item, batch
+
+
+class Refusals:
+    """Refuses batches: counts each in the stats, publishes its Error report and resolves its
+    future. Drops (``overloaded``) are logged at most once a second. Thread-safe."""
+
+    def __init__(self, stats: Stats, out: ReportOut) -> None:
+        self.stats = stats
+        self.out = out
+        self._log_lock = threading.Lock()
+        self._unlogged = 0
+        self._last_log = -math.inf
+
+    def refuse(
+        self,
+        payload: bytes,
+        key_sensor_id: str | None,
+        reason: str,
+        detail: str,
+        batch: DetectionBatchIn | None = None,
+    ) -> dict[str, Any]:
+        """Count and publish the Error report of a refused batch, and return it."""
+        self.stats.rejected_batch(reason)
+        report = self.report(payload, key_sensor_id, reason, detail, batch)
+        self.out.error(report)
+        log.debug("batch refused: %s", report)
+        return report
+
+    def reject(self, item: Item, reason: str, detail: str, batch: DetectionBatchIn | None) -> None:
+        """:meth:`refuse` a queued batch and resolve its future."""
+        report = self.refuse(item.payload, item.key_sensor_id, reason, detail, batch)
+        if not item.future.done():
+            item.future.set_result(IngestResult(False, error=report))
+
+    def drop(self, item: Item, detail: str) -> None:
+        """Drop a batch the tracker cannot take (``overloaded``), and resolve its future."""
+        self.stats.dropped()
+        report = self.report(item.payload, item.key_sensor_id, "overloaded", detail, None)
+        self.out.error(report)
+        self._log_drop(detail)
+        if not item.future.done():
+            item.future.set_result(IngestResult(False, error=report))
+
+    def flush_log(self) -> None:
+        """Log the drops not logged yet."""
+        with self._log_lock:
+            n, self._unlogged = self._unlogged, 0
+        if n:
+            log.warning("%d more batch(es) dropped", n)
+
+    @staticmethod
+    def report(
+        payload: bytes,
+        key_sensor_id: str | None,
+        reason: str,
+        detail: str,
+        batch: DetectionBatchIn | None,
+    ) -> dict[str, Any]:
+        """The Error report, naming the sensor and time from the batch or the payload."""
+        sensor, t = (batch.sensor_id, batch.time) if batch is not None else peek(payload)
+        return error_report_for(
+            len(payload), reason, detail, key_sensor_id=key_sensor_id, sensor_id=sensor, time=t
+        )
+
+    def _log_drop(self, detail: str) -> None:
+        with self._log_lock:
+            self._unlogged += 1
+            now = time.monotonic()
+            if now - self._last_log < 1.0:
+                return
+            n, self._unlogged = self._unlogged, 0
+            self._last_log = now
+        log.warning("%d batch(es) dropped: %s", n, detail)
+
+
+def peek(payload: bytes) -> tuple[str | None, float | None]:
+    """Best effort: the sensor id and time of a batch that failed validation."""
+    try:
+        obj = orjson.loads(payload)
+    except (orjson.JSONDecodeError, TypeError):
+        try:  # the standard parser reads the NaN and Infinity that orjson refuses
+            obj = json.loads(payload)
+        except (ValueError, TypeError, RecursionError):
+            return None, None
+    if not isinstance(obj, dict):
+        return None, None
+    sensor = obj.get("sensor_id")
+    t = obj.get("time")
+    ok_sensor = sensor if isinstance(sensor, str) and valid_sensor_id(sensor) else None
+    ok_time = (
+        float(t)
+        if isinstance(t, int | float) and not isinstance(t, bool) and math.isfinite(t)
+        else None
+    )
+    return ok_sensor, ok_time

@@ -1,0 +1,260 @@
+"""Before the tracker: edge checks, the time-jump guard, the reorder window, refusals and
+payload peeking; on their own, and through a running engine with the real pipeline."""
+
+from __future__ import annotations
+
+import logging
+import time
+from concurrent.futures import Future
+from typing import Any
+
+import orjson
+import pytest
+
+from service.engine import Engine
+from service.ingest import (
+    IngestResult,
+    Item,
+    Refusals,
+    ReorderBuffer,
+    check_batch,
+    peek,
+    time_jump_detail,
+)
+from service.reports import ReportOut
+from service.schemas import BatchError, DetectionBatchIn, IngestConfig
+from service.stats import Stats
+
+from .helpers import ListSink, batch_payload, run_batches
+
+pytestmark = pytest.mark.timeout(120)
+
+
+def _batch(t: float, sensor: str = "radar-1", n: int = 0) -> DetectionBatchIn:
+    dets = [{"x": float(i), "y": 0.0} for i in range(n)]
+    return check_batch(
+        orjson.dumps({"sensor_id": sensor, "time": t, "detections": dets}), None, IngestConfig()
+    )
+
+
+def _item(arrived: float, payload: bytes = b"{}", key: str | None = "radar-1") -> Item:
+    return Item(payload, key, "test", Future(), arrived=arrived)
+
+
+def test_check_batch_applies_the_key_and_the_limit() -> None:
+    payload = orjson.dumps(
+        {"sensor_id": "radar-1", "time": 1.0, "detections": [{"x": 1, "y": 2}, {"x": 3, "y": 4}]}
+    )
+    batch = check_batch(payload, "radar-1", IngestConfig())
+    assert (batch.sensor_id, batch.time, len(batch.detections)) == ("radar-1", 1.0, 2)
+    with pytest.raises(BatchError) as mismatch:
+        check_batch(payload, "radar-2", IngestConfig())
+    assert mismatch.value.reason == "sensor_mismatch"
+    assert "'radar-1' differs from the key's last chunk 'radar-2'" in mismatch.value.detail
+    with pytest.raises(BatchError) as many:
+        check_batch(payload, None, IngestConfig(max_detections_per_batch=1))
+    assert many.value.reason == "too_many_detections"
+    assert many.value.detail == (
+        "detections: 2 detections, more than ingest.max_detections_per_batch = 1"
+    )
+    with pytest.raises(BatchError) as bad:
+        check_batch(b"[1, 2]", None, IngestConfig())
+    assert bad.value.reason == "invalid_batch"
+
+
+def test_time_jump_counts_the_wall_time_waited() -> None:
+    assert time_jump_detail(110.0, 10.0, 100.0, 0.0) is None
+    assert time_jump_detail(111.0, 10.0, 100.0, 2.0) is None
+    detail = time_jump_detail(111.0, 10.0, 100.0, 0.5)
+    assert detail is not None
+    assert detail.startswith("time 111.0 is 101 s after the last processed time 10.0: ")
+    assert "ingest.max_time_jump = 100.0 s plus the 0.5 s of wall time since" in detail
+
+
+def test_reorder_buffer_releases_in_time_order_behind_the_newest() -> None:
+    buf = ReorderBuffer()
+    assert buf.wait_time(0.0, 2.0) is None and list(buf.due(0.0, 2.0)) == []
+    for t in (3.0, 1.0, 2.0, 5.0, 4.0):
+        buf.hold(_item(arrived=100.0), _batch(t))
+    assert len(buf) == 5 and buf.newest_time == 5.0
+    # window 2: what is at least 2 s older than the newest time (5) goes, oldest first
+    assert [b.time for _, b in buf.due(100.5, 2.0)] == [1.0, 2.0, 3.0]
+    assert len(buf) == 2
+    assert buf.wait_time(100.5, 2.0) == pytest.approx(1.5)
+    assert list(buf.due(101.0, 2.0)) == []
+    # two seconds of wall time since the oldest arrival: the rest goes
+    assert [b.time for _, b in buf.due(102.0, 2.0)] == [4.0, 5.0]
+    assert len(buf) == 0
+
+
+def test_reorder_buffer_wall_time_releases_the_expired_and_everything_older() -> None:
+    buf = ReorderBuffer()
+    buf.hold(_item(arrived=10.0), _batch(7.0))  # arrived first, newer time
+    buf.hold(_item(arrived=11.0), _batch(5.0))
+    buf.hold(_item(arrived=11.0), _batch(9.0))
+    assert buf.wait_time(10.0, 3.0) == pytest.approx(3.0)
+    # at 13 only the 7.0 batch has waited 3 s: it goes with the older 5.0, not the newer 9.0
+    assert [b.time for _, b in buf.due(13.0, 3.0)] == [5.0, 7.0]
+    assert [b.time for _, b in buf.drain()] == [9.0]
+    # a window set to 0 since: everything goes at once
+    buf.hold(_item(arrived=20.0), _batch(12.0))
+    buf.hold(_item(arrived=20.0), _batch(11.0))
+    assert [b.time for _, b in buf.due(20.0, 0.0)] == [11.0, 12.0]
+
+
+def test_refusals_count_report_and_resolve() -> None:
+    stats, sink = Stats("x"), ListSink()
+    refusals = Refusals(stats, ReportOut(sink))
+    batch = _batch(4.0, sensor="s-1")
+    item = _item(0.0, payload=b"x" * 10, key=None)
+    refusals.reject(item, "out_of_sequence", "too old", batch)
+    assert item.future.result(0) == IngestResult(False, error=sink.errors[-1][1])
+    assert sink.errors[-1] == (
+        "s-1",
+        {
+            "sensor_id": "s-1",
+            "time": 4.0,
+            "error": "out_of_sequence",
+            "detail": "too old",
+            "received_bytes": 10,
+        },
+    )
+    # the key's last chunk names the sensor over Zenoh, whatever the payload says
+    report = refusals.refuse(b'{"sensor_id": "s-2", "time": 1}', "radar-9", "invalid_batch", "d")
+    assert (report["sensor_id"], report["time"]) == ("radar-9", 1.0)
+    report = refusals.refuse(b"garbage", None, "invalid_json", "d")
+    assert (report["sensor_id"], report["time"]) == ("unknown", None)
+    assert stats.snapshot()["rejected_by_reason"] == {
+        "invalid_batch": 1,
+        "invalid_json": 1,
+        "out_of_sequence": 1,
+    }
+    assert stats.snapshot()["batches_dropped"] == 0
+
+
+def test_drops_are_logged_at_most_once_a_second(caplog: pytest.LogCaptureFixture) -> None:
+    stats, sink = Stats("x"), ListSink()
+    refusals = Refusals(stats, ReportOut(sink))
+    items = [_item(0.0, payload=b'{"sensor_id": "s-3", "time": 2.0}') for _ in range(5)]
+    with caplog.at_level(logging.WARNING, logger="service.ingest"):
+        for item in items:
+            refusals.drop(item, "queue full")
+        refusals.flush_log()
+        refusals.flush_log()  # nothing more to say
+    assert [r.getMessage() for r in caplog.records] == [
+        "1 batch(es) dropped: queue full",
+        "4 more batch(es) dropped",
+    ]
+    assert stats.snapshot()["batches_dropped"] == 5
+    assert stats.snapshot()["rejected_by_reason"] == {}
+    assert [e["error"] for _, e in sink.errors] == ["overloaded"] * 5
+    assert all(i.future.result(0).error["sensor_id"] == "radar-1" for i in items)  # type: ignore[index]
+
+
+@pytest.mark.parametrize(
+    ("payload", "expected"),
+    [
+        (b'{"sensor_id": "s-9", "time": 5.0, "detections": [{"x": NaN}]}', ("s-9", 5.0)),
+        (b'{"sensor_id": "s-9", "time": 3}', ("s-9", 3.0)),
+        (b'{"sensor_id": "bad id!", "time": true}', (None, None)),
+        (b'{"sensor_id": 7, "time": Infinity}', (None, None)),
+        (b"[1, 2]", (None, None)),
+        (b"\xff\xfe garbage", (None, None)),
+        (b"[" * 100_000, (None, None)),
+    ],
+)
+def test_peek_reads_what_it_can(payload: bytes, expected: tuple[Any, Any]) -> None:
+    assert peek(payload) == expected
+
+
+def test_error_report_names_what_it_can(engine: Engine, sink: ListSink) -> None:
+    r = engine.submit(b'{"sensor_id": "s-9", "time": 4.0, "detections": 3}', None, "rest")
+    err = r.result(timeout=10).error
+    assert err is not None
+    assert (err["sensor_id"], err["time"], err["error"]) == ("s-9", 4.0, "invalid_batch")
+    assert err["detail"] == "detections: not a list"
+    r = engine.submit(b"\xff\xfe garbage", None, "rest")
+    err = r.result(timeout=10).error
+    assert err is not None and err["sensor_id"] == "unknown" and err["time"] is None
+    # NaN is no JSON, but the report still names the sensor and the time
+    nan = b'{"sensor_id": "s-9", "time": 5.0, "detections": [{"x": NaN, "y": 1.0}]}'
+    err = engine.submit(nan, None, "rest").result(timeout=10).error
+    assert err is not None
+    assert (err["sensor_id"], err["time"], err["error"]) == ("s-9", 5.0, "invalid_batch")
+    assert err["detail"] == "detections[0].x: not a finite number"
+
+
+def test_a_time_far_ahead_is_refused_and_blocks_nothing(
+    engine: Engine, sink: ListSink, scans: list[Any]
+) -> None:
+    """A clock gone wrong (nanoseconds for seconds) would put every later batch out of
+    sequence; it is refused, and the right times go on."""
+    run_batches(engine, [batch_payload(s) for s in scans[:3]])
+    before = engine.latest_report_bytes()
+    bad = engine.submit(batch_payload(scans[3], time=1.7e18), "radar-1", "t").result(timeout=10)
+    assert bad.error is not None and bad.error["error"] == "time_jump"
+    assert "ingest.max_time_jump = 3600.0 s" in bad.error["detail"]
+    assert engine.latest_report_bytes() == before
+    assert all(r.accepted for r in run_batches(engine, [batch_payload(s) for s in scans[3:6]]))
+    # a jump within max_time_jump is a pause, not an error
+    later = engine.submit(batch_payload(scans[6], time=scans[5].time + 3000.0), "radar-1", "t")
+    assert later.result(timeout=10).accepted
+
+
+def test_max_time_jump_counts_the_wall_time_waited(sink: ListSink, scans: list[Any]) -> None:
+    eng = Engine(sink=sink, ingest=IngestConfig(max_time_jump=1.0))
+    eng.start()
+    try:
+        run_batches(eng, [batch_payload(scans[0])])
+        r = eng.submit(batch_payload(scans[1], time=scans[0].time + 5.0), "radar-1", "t")
+        assert r.result(timeout=10).error["error"] == "time_jump"  # type: ignore[index]
+        time.sleep(0.5)  # 5 s ahead after 0.5 s of waiting: still too far
+        r = eng.submit(batch_payload(scans[1], time=scans[0].time + 5.0), "radar-1", "t")
+        assert r.result(timeout=10).error["error"] == "time_jump"  # type: ignore[index]
+        r = eng.submit(batch_payload(scans[1], time=scans[0].time + 1.4), "radar-1", "t")
+        assert r.result(timeout=10).accepted
+    finally:
+        eng.stop()
+
+
+def test_too_many_detections(sink: ListSink, scans: list[Any]) -> None:
+    eng = Engine(sink=sink, ingest=IngestConfig(max_detections_per_batch=3))
+    eng.start()
+    try:
+        r = eng.submit(batch_payload(scans[0]), "radar-1", "test").result(timeout=10)
+        assert r.error is not None and r.error["error"] == "too_many_detections"
+        assert "more than ingest.max_detections_per_batch = 3" in r.error["detail"]
+        assert eng.seq == 0
+    finally:
+        eng.stop()
+
+
+def test_reorder_window_puts_late_batches_in_order(sink: ListSink, scans: list[Any]) -> None:
+    eng = Engine(sink=sink, ingest=IngestConfig(reorder_window=1.5))
+    eng.start()
+    try:
+        order = [0, 2, 1, 3, 5, 4, 6, 7]
+        futures = [eng.submit(batch_payload(scans[i]), "radar-1", "t") for i in order]
+        # held batches wait for newer times, or W seconds of wall time
+        results = [f.result(timeout=10) for f in futures]
+        assert all(r.accepted for r in results), [r.error for r in results]
+        assert [r["time"] for r in sink.tracks] == [float(i) for i in range(8)]
+        # older than the last processed time: still out of sequence
+        late = eng.submit(batch_payload(scans[2]), "radar-1", "t").result(timeout=10)
+        assert late.error is not None and late.error["error"] == "out_of_sequence"
+    finally:
+        eng.stop()
+
+
+def test_reorder_window_releases_after_wall_time(sink: ListSink, scans: list[Any]) -> None:
+    eng = Engine(sink=sink, ingest=IngestConfig(reorder_window=0.3))
+    eng.start()
+    try:
+        t0 = time.monotonic()
+        fut = eng.submit(batch_payload(scans[0]), "radar-1", "t")
+        time.sleep(0.1)
+        assert not fut.done() and eng.stats.snapshot()["held_for_reorder"] == 1
+        assert fut.result(timeout=5).accepted
+        assert 0.25 <= time.monotonic() - t0 < 2.0
+    finally:
+        eng.stop()
