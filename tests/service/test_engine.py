@@ -18,6 +18,7 @@ from service.engine import Engine
 from service.ingest import IngestResult
 from service.schemas import IngestConfig
 from trackers.config import TrackerConfig
+from trackers.peers import PeerProposal
 from trackers.pipeline import TrackingPipeline
 from trackers.types import Scan, StepResult
 
@@ -248,5 +249,51 @@ def test_a_tracker_failure_is_reported_and_the_worker_survives(
         err = results[3].error
         assert err is not None and err["error"] == "internal_error" and "boom" in err["detail"]
         assert eng.running and eng.seq == 5
+    finally:
+        eng.stop()
+
+
+class _PeerFailingOnce:
+    """An extended-kind peer that claims nothing and fails on the scan at ``fail_at``."""
+
+    kind = "extended"
+
+    def __init__(self, fail_at: float) -> None:
+        self.fail_at = fail_at
+        self.committed = 0
+
+    def propose(self, scan: Scan, view: Any) -> PeerProposal:
+        if scan.time == self.fail_at:
+            raise ArithmeticError("extent not positive definite")
+        return PeerProposal(claimed=np.zeros(scan.size, dtype=bool))
+
+    def commit(self, proposal: Any) -> None:
+        self.committed += 1
+
+    def snapshot(self) -> tuple[()]:
+        return ()
+
+    def reconfigure(self, config: TrackerConfig) -> None:
+        pass
+
+
+def test_a_failing_peer_is_an_internal_error_naming_it_and_changes_no_track(
+    sink: ListSink, scans: list[Any]
+) -> None:
+    peer = _PeerFailingOnce(fail_at=scans[3].time)
+    eng = Engine(sink=sink, pipeline_factory=lambda c: TrackingPipeline(c, peers=[peer]))
+    eng.start()
+    try:
+        results = run_batches(eng, [batch_payload(s) for s in scans[:3]])
+        assert all(r.accepted for r in results)
+        before = eng.tracks("all")
+        r = run_batches(eng, [batch_payload(scans[3])])[0]
+        assert r.error is not None and r.error["error"] == "internal_error"
+        assert "peer 'extended'" in r.error["detail"] and "positive definite" in r.error["detail"]
+        assert eng.tracks("all") == before and eng.seq == 3 and peer.committed == 3
+        # The same scan again goes through once the peer copes: nothing had moved on.
+        peer.fail_at = -1.0
+        assert run_batches(eng, [batch_payload(scans[3])])[0].accepted
+        assert eng.seq == 4 and peer.committed == 4
     finally:
         eng.stop()
