@@ -127,20 +127,23 @@ def rss_mb(pid: int) -> float:
 
 
 def ingest_cost(repeats: int = 2000) -> tuple[float, int]:
-    """Median milliseconds to decode, validate and convert one reference batch (JSON bytes to
-    tracker arrays), as the engine does for each batch; and the batch's detection count."""
+    """Median milliseconds to check (cost bounds, decoding, validation, duplicate keys) and
+    convert one reference batch (JSON bytes to tracker arrays), as the engine does for each
+    batch; and the batch's detection count."""
     import orjson
 
     from clients.scenarios.multitarget import reference_scenario, simulate
     from service.convert import batch_to_scan
-    from service.schemas import decode_batch
+    from service.ingest import check_batch
+    from service.schemas import IngestConfig
 
     scan = simulate(reference_scenario(0))[50]
     payload = orjson.dumps(scan.to_batch())
+    ingest = IngestConfig()
     times = []
     for _ in range(repeats):
         t0 = time.perf_counter()
-        batch_to_scan(decode_batch(payload), 5.0)
+        batch_to_scan(check_batch(payload, scan.sensor_id, ingest), 5.0)
         times.append(time.perf_counter() - t0)
     return 1e3 * float(np.median(times[repeats // 10 :])), len(scan.z)
 

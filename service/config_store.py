@@ -10,16 +10,19 @@ accepted with :meth:`ConfigStore.take_pending` before its next batch.
 
 from __future__ import annotations
 
-import contextlib
-import os
-import tempfile
 import threading
 from pathlib import Path
 from typing import Any
 
 import orjson
 
-from service.config_tree import ConfigError, config_document, validate_config_document
+from service.config_tree import (
+    ConfigError,
+    check_patch,
+    config_document,
+    validate_config_document,
+)
+from service.files import atomic_write
 from service.schemas import IngestConfig
 from trackers.config import TrackerConfig
 
@@ -63,22 +66,10 @@ def load_config_file(
 
 
 def save_config_file(path: Path, doc: dict[str, Any]) -> None:
-    """Write ``doc`` to ``path`` atomically: a temporary file in the same folder, fsync'd,
-    then renamed over the old one."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
+    """Write ``doc`` to ``path`` atomically (:func:`service.files.atomic_write`: a temporary
+    file in the same folder, fsync'd, then renamed over the old one)."""
     data = orjson.dumps(doc, option=orjson.OPT_INDENT_2 | orjson.OPT_APPEND_NEWLINE)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "wb") as fh:
-            fh.write(data)
-            fh.flush()
-            os.fsync(fh.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        with contextlib.suppress(OSError):
-            os.unlink(tmp)
-        raise
+    atomic_write(Path(path), data)
 
 
 class ConfigStore:
@@ -122,8 +113,7 @@ class ConfigStore:
     def patch(self, patch: Any) -> dict[str, Any]:
         """Merge ``patch`` into the accepted document (JSON merge patch), then as
         :meth:`replace`."""
-        if not isinstance(patch, dict):
-            raise ConfigError("config patch: expected a JSON object")
+        check_patch(patch)
         with self._lock:
             current = config_document(self._tracker, self._ingest)
             return self._accept(merge_patch(current, patch))

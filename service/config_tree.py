@@ -27,6 +27,8 @@ from trackers.config import TrackerConfig
 __all__ = [
     "ConfigDocument",
     "ConfigError",
+    "ConfigPatch",
+    "check_patch",
     "config_document",
     "section_model",
     "to_tracker_config",
@@ -50,7 +52,14 @@ def _annotation(hint: Any, meta: Any) -> Any:
     if hint is str:
         return Literal[choices] if choices else Annotated[str, Strict()]  # type: ignore[valid-type]
     if get_origin(hint) is tuple:
-        return list[_annotation(get_args(hint)[0], meta)]  # type: ignore[misc]
+        item = _annotation(get_args(hint)[0], meta)
+        fewest, most = meta.get("length", (0, None))
+        # A list of names names each once.
+        extra = {"uniqueItems": True} if meta.get("choices") else None
+        return Annotated[
+            list[item],  # type: ignore[valid-type]
+            Field(min_length=fewest, max_length=most, json_schema_extra=extra),
+        ]
     if dataclasses.is_dataclass(hint):
         return section_model(hint)  # type: ignore[arg-type]
     raise TypeError(f"no wire type for configuration field type {hint!r}")
@@ -107,6 +116,30 @@ def _document_model() -> type[BaseModel]:
 ConfigDocument = _document_model()
 
 
+def _patch_model(model: type[BaseModel], name: str) -> type[BaseModel]:
+    """The JSON merge patch of ``model``: every field optional and nullable (``null`` resets
+    it to its default), sections patched field by field."""
+    fields: dict[str, Any] = {}
+    for fname, info in model.model_fields.items():
+        ann = info.annotation
+        if isinstance(ann, type) and issubclass(ann, BaseModel):
+            ann = _patch_model(ann, ann.__name__ + "Patch")
+            typ: Any = ann | None
+        else:
+            typ = Annotated[ann | None, *info.metadata] if info.metadata else ann | None
+        fields[fname] = (typ, Field(default=None, description=info.description))
+    return create_model(  # type: ignore[call-overload,no-any-return]
+        name,
+        __config__=ConfigDict(extra="forbid"),
+        __doc__=(model.__doc__ or "") + "\n\nA JSON merge patch: `null` resets a field.",
+        **fields,
+    )
+
+
+#: The body of ``PATCH /api/v1/config``: any part of the document; ``null`` resets a field.
+ConfigPatch = _patch_model(ConfigDocument, "ConfigPatch")
+
+
 def _built(cls: type, values: dict[str, Any]) -> Any:
     hints = get_type_hints(cls)
     kwargs: dict[str, Any] = {}
@@ -138,17 +171,26 @@ def validate_config_document(
     if not isinstance(doc, dict):
         raise ConfigError("config: expected a JSON object")
     if ingest_defaults is not None:
-        ingest = doc.get("ingest")
-        if ingest is None:
-            ingest = {}
-        if not isinstance(ingest, dict):
-            raise ConfigError("ingest: expected an object")
-        doc = {**doc, "ingest": {**ingest_defaults.model_dump(), **ingest}}
+        ingest = doc.get("ingest", {})
+        if isinstance(ingest, dict):  # anything else: refused below, naming the field
+            doc = {**doc, "ingest": {**ingest_defaults.model_dump(), **ingest}}
     try:
         model = ConfigDocument.model_validate(doc)
     except ValidationError as exc:
         raise ConfigError(format_validation_error(exc)) from None
     return to_tracker_config(model), model.ingest  # type: ignore[attr-defined]
+
+
+def check_patch(patch: Any) -> None:
+    """Raise :class:`ConfigError` unless ``patch`` fits :data:`ConfigPatch`: known fields only
+    (``null`` included), each of its type and within its bounds. The merged document is then
+    validated as a whole."""
+    if not isinstance(patch, dict):
+        raise ConfigError("config patch: expected a JSON object")
+    try:
+        ConfigPatch.model_validate(patch)
+    except ValidationError as exc:
+        raise ConfigError(format_validation_error(exc)) from None
 
 
 def config_document(tracker: TrackerConfig, ingest: IngestConfig) -> dict[str, Any]:

@@ -15,7 +15,7 @@ from typing import Any
 import numpy as np
 import orjson
 
-from service.schemas import DetectionBatchIn
+from service.schemas import DetectionBatchIn, DetectionIn
 from trackers.types import Scan, StepResult, TrackSnapshot
 
 __all__ = [
@@ -54,28 +54,30 @@ def batch_to_scan(batch: DetectionBatchIn, position_std: float) -> Scan:
             clutter_density=batch.clutter_density,
             sensor_position=_opt_array(batch.sensor_position),
         )
-    z = np.array([(d.x, d.y) for d in dets], dtype=float)
-    R = np.array([default if d.cov is None else d.cov for d in dets], dtype=float)
-    vr = [d.vr for d in dets]
-    amp = [d.amplitude for d in dets]
-    range_rate = None
-    if any(v is not None for v in vr):
-        range_rate = np.array([_NAN if v is None else v for v in vr], dtype=float)
-    amplitude = None
-    if any(a is not None for a in amp):
-        amplitude = np.array([_NAN if a is None else a for a in amp], dtype=float)
+    z = np.array([(d["x"], d["y"]) for d in dets], dtype=float)
+    R = np.array([d.get("cov") or default for d in dets], dtype=float)
+    range_rate = _optional(dets, "vr")
+    amplitude = _optional(dets, "amplitude")
     return Scan(
         sensor_id=batch.sensor_id,
         time=batch.time,
         z=z,
         R=R,
-        detection_ids=tuple(d.id for d in dets),
+        detection_ids=tuple(d.get("id") for d in dets),
         pd=batch.pd,
         clutter_density=batch.clutter_density,
         sensor_position=_opt_array(batch.sensor_position),
         range_rate=range_rate,
         amplitude=amplitude,
     )
+
+
+def _optional(dets: list[DetectionIn], name: str) -> np.ndarray | None:
+    """The detections' ``name`` values (NaN where absent), or ``None`` if none has one."""
+    values = [d.get(name) for d in dets]
+    if not any(v is not None for v in values):
+        return None
+    return np.array([_NAN if v is None else v for v in values], dtype=float)
 
 
 def _opt_array(value: tuple[float, float] | None) -> np.ndarray | None:

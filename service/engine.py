@@ -3,10 +3,12 @@
 Batches arrive as raw bytes from any thread (:meth:`Engine.submit`) and wait on a bounded
 queue; a full queue blocks the sender for up to ``put_timeout`` seconds (back-pressure for
 Zenoh publishers using ``CongestionControl.BLOCK``) and then the batch is dropped, counted
-and reported as ``overloaded``, never silently lost. The worker checks each batch
-(:mod:`service.ingest`: edge checks, time-jump guard, reorder window), converts and tracks it,
-publishes a Track report or an Error report, and replaces the state readers see
-(:mod:`service.reports`). A rejected batch changes no track. Configuration changes are
+and reported as ``overloaded``, never silently lost. The queue holds at most ``queue_bytes``
+of payloads, and a payload over ``max_batch_bytes`` is refused before it is queued, so what
+waits is bounded in memory as well as in count. The worker checks each batch
+(:mod:`service.ingest`: edge checks, exact duplicates, time-jump guard, reorder window),
+converts and tracks it, publishes a Track report or an Error report, and replaces the state
+readers see (:mod:`service.reports`). A rejected batch changes no track. Configuration changes are
 validated and saved by the caller's thread (:mod:`service.config_store`) and applied by the
 worker before its next batch.
 """
@@ -29,16 +31,21 @@ from service.convert import batch_to_scan, report_dict, track_to_dict
 from service.ingest import (
     IngestResult,
     Item,
+    RecentBatches,
     Refusals,
     ReorderBuffer,
+    batch_digest,
     check_batch,
     time_jump_detail,
 )
+from service.payload import DEFAULT_MAX_BATCH_BYTES, DEFAULT_QUEUE_BYTES, too_large_detail
 from service.reports import ReportOut, ReportSink, ReportState
 from service.schemas import BatchError, DetectionBatchIn, IngestConfig
+from service.state_store import EngineCheckpoint, StateStore, restored_result
 from service.stats import Stats
 from trackers.config import TrackerConfig
 from trackers.pipeline import TrackingPipeline
+from trackers.state import StateError
 from trackers.types import ScanRejected, TrackSnapshot
 
 __all__ = ["Engine"]
@@ -69,6 +76,9 @@ class Engine:
         config_file: Path | None = None,
         pipeline_factory: Callable[[TrackerConfig], TrackingPipeline] = TrackingPipeline,
         stop_drain_seconds: float = 1.0,
+        max_batch_bytes: int = DEFAULT_MAX_BATCH_BYTES,
+        queue_bytes: int = DEFAULT_QUEUE_BYTES,
+        state_store: StateStore | None = None,
     ) -> None:
         defaults = ingest_defaults or IngestConfig()
         self._config = ConfigStore(
@@ -85,6 +95,11 @@ class Engine:
         self._refusals = Refusals(self.stats, self._out)
         self._queue: queue.Queue[Item | _Stop] = queue.Queue(maxsize=queue_size)
         self._put_timeout = put_timeout
+        self.max_batch_bytes = max_batch_bytes
+        self._queue_bytes = queue_bytes
+        self._queued_bytes = 0  # payload bytes in the queue
+        self._bytes_free = threading.Condition()
+        self._recent = RecentBatches()
         self._stop_drain_seconds = stop_drain_seconds
         self._state = ReportState.empty()
         self._seq = 0
@@ -96,6 +111,10 @@ class Engine:
         self.stats.queue_depth = self._queue.qsize
         self.stats.held_for_reorder = self._held.__len__
         self.stats.tracks_tentative = lambda: self._state.tentative_count()
+        # the tracker state file (service.state_store): restored at start, saved off the worker
+        self._state_store = state_store
+        self._checkpoint: EngineCheckpoint | None = None
+        self._restore_pending = state_store is not None
 
     @property
     def sink(self) -> ReportSink:
@@ -111,6 +130,17 @@ class Engine:
     def start(self) -> None:
         if self._thread is not None:
             return
+        if self._state_store is not None:
+            try:
+                self._pipeline.checkpoint()
+            except StateError as exc:
+                log.warning("the tracker state is not saved: %s", exc)
+                self._state_store = None
+        if self._state_store is not None:
+            if self._restore_pending:
+                self._restore_pending = False
+                self._restore(self._state_store)
+            self._state_store.start(lambda: self._checkpoint)
         self._thread = threading.Thread(target=self._run, name="tracker-engine", daemon=True)
         self._thread.start()
 
@@ -127,10 +157,31 @@ class Engine:
         if self._thread.is_alive():
             log.warning("tracker worker did not stop within %.1f s", timeout)
         self._thread = None
+        if self._state_store is not None:  # the state after the last batch processed
+            self._state_store.stop()
+            self._state_store.save_logged(self._checkpoint)
 
     @property
     def running(self) -> bool:
         return self._thread is not None and self._thread.is_alive()
+
+    def _restore(self, store: StateStore) -> None:
+        """Go on from the saved state, if there is one to use: tracks and ids, the
+        pipeline's last time, the report counter and the latest report (its tracks as
+        restored), and the wall time since its last batch for the time-jump guard."""
+        restored = store.restore_into(self._pipeline)
+        if restored is None:
+            return
+        self._seq = restored.seq
+        self._last_wall = time.monotonic() - restored.since_last_batch
+        result = restored_result(self._pipeline, restored.sensor_id)
+        if result is not None:
+            confirmed = [track_to_dict(t) for t in result.confirmed()]
+            self._state = ReportState.of(report_dict(self._seq, result, 0.0, confirmed), result)
+            self.stats.restored(self._seq, result.time, len(confirmed))
+        self._checkpoint = EngineCheckpoint(
+            self._seq, self._pipeline.checkpoint(), restored.sensor_id, self._last_wall
+        )
 
     # -- ingest -----------------------------------------------------------------------------
 
@@ -138,7 +189,7 @@ class Engine:
         """Decode and validate one batch against the contract and the current ingest limits;
         raise :class:`~service.schemas.BatchError` when it is refused. Thread-safe, changes
         nothing."""
-        return check_batch(payload, key_sensor_id, self._config.ingest)
+        return check_batch(payload, key_sensor_id, self._config.ingest, self.max_batch_bytes)
 
     def submit(
         self,
@@ -154,20 +205,61 @@ class Engine:
         reported as ``overloaded``. The future resolves to an
         :class:`~service.ingest.IngestResult`."""
         fut: Future[IngestResult] = Future()
-        self.stats.received(len(payload))
+        size = len(payload)
+        self.stats.received(size)
+        if size > self.max_batch_bytes:  # refused unread, before it takes any queue space
+            detail = too_large_detail(size, self.max_batch_bytes)
+            report = self._refusals.refuse_unread(size, key_sensor_id, "batch_too_large", detail)
+            fut.set_result(IngestResult(False, error=report))
+            return fut
         item = Item(payload, key_sensor_id, source, fut, batch)
         if self._stopping.is_set() or self._thread is None:
             self._refusals.drop(item, "the service is stopping")
             return fut
+        deadline = time.monotonic() + self._put_timeout
+        if not self._reserve(size, deadline):
+            self._refusals.drop(
+                item,
+                f"the ingest queue's {self._queue_bytes} bytes stayed full for "
+                f"{self._put_timeout} s",
+            )
+            return fut
         try:
-            self._queue.put(item, timeout=self._put_timeout)
+            self._queue.put(item, timeout=max(0.0, deadline - time.monotonic()))
         except queue.Full:
+            self._release(size)
             self._refusals.drop(
                 item,
                 f"the ingest queue ({self._queue.maxsize} batches) stayed full for "
                 f"{self._put_timeout} s",
             )
         return fut
+
+    def _reserve(self, size: int, deadline: float) -> bool:
+        """Take ``size`` bytes of the queue's budget, waiting until ``deadline`` for them
+        (a batch that fits no budget still goes into an empty queue)."""
+        with self._bytes_free:
+            while self._queued_bytes and self._queued_bytes + size > self._queue_bytes:
+                left = deadline - time.monotonic()
+                if left <= 0:
+                    return False
+                self._bytes_free.wait(left)
+            self._queued_bytes += size
+        return True
+
+    def _release(self, size: int) -> None:
+        with self._bytes_free:
+            self._queued_bytes -= size
+            self._bytes_free.notify_all()
+
+    def refuse_unread(
+        self, size: int, sensor_id: str | None, reason: str, detail: str
+    ) -> dict[str, Any]:
+        """Count, publish and return the Error report of a payload of ``size`` bytes refused
+        before it was read (too large, or on a key that names no sensor: ``sensor_id`` is
+        then ``None`` and the report goes to ``unknown``)."""
+        self.stats.received(size)
+        return self._refusals.refuse_unread(size, sensor_id, reason, detail)
 
     def reject(
         self,
@@ -259,6 +351,7 @@ class Engine:
             except queue.Empty:
                 break
             if isinstance(rest, Item):
+                self._release(len(rest.payload))
                 self._refusals.drop(rest, "the service is stopping")
         self._refusals.flush_log()
 
@@ -274,6 +367,8 @@ class Engine:
             item = None
         if isinstance(item, _Stop):
             return False
+        if item is not None:
+            self._release(len(item.payload))
         try:
             self._apply_pending()
             if item is not None:
@@ -315,22 +410,40 @@ class Engine:
         try:
             # a batch the caller validated is checked again only against a lower limit
             if batch is None or len(batch.detections) > ingest.max_detections_per_batch:
-                batch = check_batch(item.payload, item.key_sensor_id, ingest)
+                batch = check_batch(item.payload, item.key_sensor_id, ingest, self.max_batch_bytes)
         except BatchError as exc:
             self._refusals.reject(item, exc.reason, exc.detail, None)
             return
         self.stats.detections_in(len(batch.detections))
         last = self._pipeline.last_time
+        digest = None
+        if last is None or batch.time >= last:  # an older copy is out of sequence anyway
+            digest = batch_digest(item.payload)
+            if self._recent.seen(batch.sensor_id, digest):
+                detail = (
+                    f"the same {len(item.payload)} bytes as a batch of {batch.sensor_id} "
+                    f"accepted before (one of its last {self._recent.per_sensor})"
+                )
+                self._refusals.reject(item, "duplicate_batch", detail, batch)
+                return
         if last is not None:
             waited = time.monotonic() - self._last_wall
             jump = time_jump_detail(batch.time, last, ingest.max_time_jump, waited)
             if jump is not None:
                 self._refusals.reject(item, "time_jump", jump, batch)
                 return
+        if digest is not None:  # accepted: a copy is a duplicate, unless the tracker refuses it
+            item.digest = digest
+            self._recent.add(batch.sensor_id, digest)
         if ingest.reorder_window > 0 and (last is None or batch.time >= last):
             self._held.hold(item, batch)
             return
         self._process(item, batch)
+
+    def _forget(self, item: Item, batch: DetectionBatchIn) -> None:
+        """A batch accepted, then refused by the tracker, is no duplicate if it comes again."""
+        if item.digest is not None:
+            self._recent.discard(batch.sensor_id, item.digest)
 
     def _process(self, item: Item, batch: DetectionBatchIn) -> None:
         pipeline = self._pipeline
@@ -340,10 +453,12 @@ class Engine:
             result = pipeline.process(scan)
             ms = (time.perf_counter() - t0) * 1000.0
         except ScanRejected as exc:
+            self._forget(item, batch)
             self._refusals.reject(item, exc.reason, exc.detail, batch)
             return
         except Exception as exc:  # a tracker bug: report it, keep the worker alive
             log.exception("the tracker failed on a batch from %s", batch.sensor_id)
+            self._forget(item, batch)
             self._refusals.reject(item, "internal_error", f"{type(exc).__name__}: {exc}", batch)
             return
         self._seq += 1
@@ -352,6 +467,10 @@ class Engine:
         confirmed = [track_to_dict(t) for t in result.confirmed()]
         state = ReportState.of(report_dict(seq, result, ms, confirmed), result)
         self._state = state
+        if self._state_store is not None:
+            self._checkpoint = EngineCheckpoint(
+                seq, pipeline.checkpoint(), result.sensor_id, self._last_wall
+            )
         self.stats.processed(seq, result.time, len(batch.detections), ms, len(confirmed))
         self._out.tracks(state.data)
         item.future.set_result(IngestResult(True, seq))

@@ -1,20 +1,27 @@
 """What happens to a batch before the tracker: the edge checks (:func:`check_batch`), the
+memory of recent batches that refuses exact duplicates (:class:`RecentBatches`), the
 time-jump guard (:func:`time_jump_detail`), the reorder window (:class:`ReorderBuffer`), and
 refusals (:class:`Refusals`: counted, reported, drops logged at most once a second).
 
+Every check that costs in proportion to the payload comes after one that bounds it: its size
+first, then what it holds (:func:`service.payload.check_cost`), before it is parsed.
+
 A refused batch gets an Error report naming its sensor and time where they can be read, even
-from a payload that failed validation (:func:`peek`).
+from a payload that failed validation (:func:`peek`, which reads at most a bounded effort).
 """
 
 from __future__ import annotations
 
+import hashlib
 import heapq
 import itertools
 import json
 import logging
 import math
+import re
 import threading
 import time
+from collections import OrderedDict
 from collections.abc import Iterator
 from concurrent.futures import Future
 from dataclasses import dataclass, field
@@ -22,6 +29,13 @@ from typing import Any
 
 import orjson
 
+from service.payload import (
+    DEFAULT_MAX_BATCH_BYTES,
+    check_cost,
+    duplicate_key_detail,
+    duplicate_keys,
+    too_large_detail,
+)
 from service.reports import ReportOut, error_report_for
 from service.schemas import (
     BatchError,
@@ -35,8 +49,10 @@ from service.stats import Stats
 __all__ = [
     "IngestResult",
     "Item",
+    "RecentBatches",
     "Refusals",
     "ReorderBuffer",
+    "batch_digest",
     "check_batch",
     "peek",
     "time_jump_detail",
@@ -59,7 +75,8 @@ class IngestResult:
 @dataclass
 class Item:
     """One submitted batch on its way to the tracker. ``key_sensor_id``: the Zenoh key's last
-    chunk (``None`` over REST); ``batch``: the batch if the submitter validated it already."""
+    chunk (``None`` over REST); ``batch``: the batch if the submitter validated it already;
+    ``digest``: its :func:`batch_digest` once accepted."""
 
     payload: bytes
     key_sensor_id: str | None
@@ -67,14 +84,30 @@ class Item:
     future: Future[IngestResult]
     batch: DetectionBatchIn | None = None
     arrived: float = field(default_factory=time.monotonic)
+    digest: bytes | None = None
 
 
 def check_batch(
-    payload: bytes, key_sensor_id: str | None, ingest: IngestConfig
+    payload: bytes,
+    key_sensor_id: str | None,
+    ingest: IngestConfig,
+    max_bytes: int = DEFAULT_MAX_BATCH_BYTES,
 ) -> DetectionBatchIn:
     """Decode and validate one batch against the contract and the ingest limits; raise
-    :class:`~service.schemas.BatchError` when it is refused."""
+    :class:`~service.schemas.BatchError` when it is refused.
+
+    In order of cost: the payload's size (``max_bytes``), what it holds counted from its bytes
+    (at most ``ingest.max_detections_per_batch`` detections and the JSON values a batch of
+    them can have), then parsing and validation, which stop at the first bad detection; then
+    keys that JSON parsers would take twice, keeping the last."""
+    size = len(payload)
+    if size > max_bytes:
+        raise BatchError("batch_too_large", too_large_detail(size, max_bytes))
+    exact = check_cost(payload, ingest.max_detections_per_batch)
     batch = decode_batch(payload)
+    dropped = duplicate_keys(payload, batch, exact)
+    if dropped:
+        raise BatchError("invalid_batch", duplicate_key_detail(payload, dropped))
     if key_sensor_id is not None and batch.sensor_id != key_sensor_id:
         raise BatchError(
             "sensor_mismatch",
@@ -152,6 +185,49 @@ class ReorderBuffer:
             yield item, batch
 
 
+def batch_digest(payload: bytes) -> bytes:
+    """What identifies a payload byte for byte (BLAKE2b, 128 bits)."""
+    return hashlib.blake2b(payload, digest_size=16).digest()
+
+
+class RecentBatches:
+    """The digests of the last ``per_sensor`` batches accepted from each of the last
+    ``sensors`` sensors (least recently seen forgotten first): at most
+    ``per_sensor x sensors`` digests, 9 MB with the defaults. A batch whose payload is
+    byte for byte one of its sensor's is an exact duplicate (a sender's retry, a replay): it
+    is refused, not processed twice. Used by one thread (the worker)."""
+
+    def __init__(self, per_sensor: int = 64, sensors: int = 1024) -> None:
+        self.per_sensor = per_sensor
+        self.sensors = sensors
+        self._by_sensor: OrderedDict[str, OrderedDict[bytes, None]] = OrderedDict()
+
+    def __len__(self) -> int:
+        return sum(len(d) for d in self._by_sensor.values())
+
+    def seen(self, sensor_id: str, digest: bytes) -> bool:
+        recent = self._by_sensor.get(sensor_id)
+        return recent is not None and digest in recent
+
+    def add(self, sensor_id: str, digest: bytes) -> None:
+        recent = self._by_sensor.get(sensor_id)
+        if recent is None:
+            recent = self._by_sensor[sensor_id] = OrderedDict()
+            if len(self._by_sensor) > self.sensors:
+                self._by_sensor.popitem(last=False)
+        else:
+            self._by_sensor.move_to_end(sensor_id)
+        recent[digest] = None
+        if len(recent) > self.per_sensor:
+            recent.popitem(last=False)
+
+    def discard(self, sensor_id: str, digest: bytes) -> None:
+        """Forget a batch accepted, then refused by the tracker: it may come again."""
+        recent = self._by_sensor.get(sensor_id)
+        if recent is not None:
+            recent.pop(digest, None)
+
+
 class Refusals:
     """Refuses batches: counts each in the stats, publishes its Error report and resolves its
     future. Drops (``overloaded``) are logged at most once a second. Thread-safe."""
@@ -172,15 +248,29 @@ class Refusals:
         batch: DetectionBatchIn | None = None,
     ) -> dict[str, Any]:
         """Count and publish the Error report of a refused batch, and return it."""
-        self.stats.rejected_batch(reason)
         report = self.report(payload, key_sensor_id, reason, detail, batch)
+        self.stats.rejected_batch(reason)
         self.out.error(report)
         log.debug("batch refused: %s", report)
         return report
 
+    def refuse_unread(
+        self, size: int, sensor_id: str | None, reason: str, detail: str
+    ) -> dict[str, Any]:
+        """:meth:`refuse` a payload of ``size`` bytes that is not read at all (too large, or
+        on a key that is not a sensor's): its report names ``sensor_id`` (or ``unknown``) and
+        no time."""
+        report = error_report_for(
+            size, reason, detail, key_sensor_id=sensor_id, sensor_id=None, time=None
+        )
+        self.stats.rejected_batch(reason)
+        self.out.error(report)
+        log.debug("batch refused unread: %s", report)
+        return report
+
     def reject(self, item: Item, reason: str, detail: str, batch: DetectionBatchIn | None) -> None:
         """:meth:`refuse` a queued batch and resolve its future."""
-        report = self.refuse(item.payload, item.key_sensor_id, reason, detail, batch)
+        report = self.refuse(item.payload, item.key_sensor_id, reason, detail, batch or item.batch)
         if not item.future.done():
             item.future.set_result(IngestResult(False, error=report))
 
@@ -225,23 +315,52 @@ class Refusals:
         log.warning("%d batch(es) dropped: %s", n, detail)
 
 
+#: Payloads up to this size are parsed to read their sensor and time; larger ones are
+#: searched for the two keys (:func:`peek`).
+PEEK_PARSE_UP_TO = 64 * 1024
+_PEEK_SENSOR = re.compile(rb'"sensor_id"\s*:\s*"([A-Za-z0-9_.\-]{1,64})"')
+_PEEK_TIME = re.compile(
+    rb'"time"\s*:\s*(-?[0-9]{1,400}(?:\.[0-9]{1,400})?(?:[eE][+-]?[0-9]{1,6})?)'
+)
+
+
+def _finite(value: Any) -> float | None:
+    """``value`` as a finite float, if it is a JSON number that is one."""
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        return None
+    try:
+        out = float(value)  # an integer of 400 digits overflows
+    except OverflowError:
+        return None
+    return out if math.isfinite(out) else None
+
+
 def peek(payload: bytes) -> tuple[str | None, float | None]:
-    """Best effort: the sensor id and time of a batch that failed validation."""
+    """Best effort: the sensor id and time of a batch that failed validation. Never raises.
+
+    A payload of up to :data:`PEEK_PARSE_UP_TO` bytes is parsed; a larger one is searched
+    for its first ``"sensor_id"`` and ``"time"`` keys (one pass each, in C), so that reading
+    them costs little whatever the payload holds."""
+    if len(payload) > PEEK_PARSE_UP_TO:
+        return _peek_search(payload)
     try:
         obj = orjson.loads(payload)
     except (orjson.JSONDecodeError, TypeError):
-        try:  # the standard parser reads the NaN and Infinity that orjson refuses
+        try:  # the standard parser reads the NaN, Infinity and huge numbers orjson refuses
             obj = json.loads(payload)
         except (ValueError, TypeError, RecursionError):
             return None, None
     if not isinstance(obj, dict):
         return None, None
     sensor = obj.get("sensor_id")
-    t = obj.get("time")
     ok_sensor = sensor if isinstance(sensor, str) and valid_sensor_id(sensor) else None
-    ok_time = (
-        float(t)
-        if isinstance(t, int | float) and not isinstance(t, bool) and math.isfinite(t)
-        else None
+    return ok_sensor, _finite(obj.get("time"))
+
+
+def _peek_search(payload: bytes) -> tuple[str | None, float | None]:
+    sensor = _PEEK_SENSOR.search(payload)
+    t = _PEEK_TIME.search(payload)
+    return (
+        sensor.group(1).decode() if sensor else None,
+        _finite(float(t.group(1))) if t else None,
     )
-    return ok_sensor, ok_time

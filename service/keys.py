@@ -8,6 +8,7 @@ Clients may import this module; it imports nothing else of the service.
 from __future__ import annotations
 
 import json
+import re
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -17,6 +18,8 @@ import zenoh
 __all__ = ["DEFAULT_PREFIX", "Keys", "local_endpoints", "make_config"]
 
 DEFAULT_PREFIX = "tracking"
+#: A sensor id as the contract has it (``service.schemas.SENSOR_ID_PATTERN``).
+_SENSOR_ID = re.compile(r"^[A-Za-z0-9_.\-]{1,64}$")
 
 
 @dataclass(frozen=True)
@@ -60,6 +63,15 @@ class Keys:
         """The sensor id of a detections or errors key."""
         return key.rsplit("/", 1)[-1]
 
+    def sensor_of(self, key: str) -> str | None:
+        """The sensor id of a key that is exactly ``{prefix}/detections/{sensor_id}``, the id
+        one chunk of 1 to 64 of ``A-Z a-z 0-9 _ . -``; ``None`` for any other key."""
+        head = f"{self.prefix}/detections/"
+        if not key.startswith(head):
+            return None
+        sensor = key[len(head) :]
+        return sensor if _SENSOR_ID.match(sensor) else None
+
 
 def make_config(
     mode: str,
@@ -69,9 +81,11 @@ def make_config(
     config_file: Path | None = None,
     multicast_scouting: bool = False,
     shared_memory: bool = False,
+    max_message_size: int | None = None,
 ) -> zenoh.Config:
     """A Zenoh config: ``mode``, endpoints, multicast scouting and the shared-memory transport
-    off unless asked for.
+    off unless asked for. ``max_message_size``: the largest message (bytes) the transport
+    reassembles; larger ones are dropped as they arrive (Zenoh's default is 1 GiB).
 
     ``config_file`` (JSON5) is the starting point when given; the other arguments override it.
     A client does not listen, so ``listen`` is ignored in client mode."""
@@ -83,6 +97,8 @@ def make_config(
         conf.insert_json5("connect/endpoints", json.dumps(list(connect)))
     conf.insert_json5("scouting/multicast/enabled", "true" if multicast_scouting else "false")
     conf.insert_json5("transport/shared_memory/enabled", "true" if shared_memory else "false")
+    if max_message_size is not None:
+        conf.insert_json5("transport/link/rx/max_message_size", str(int(max_message_size)))
     return conf
 
 

@@ -24,12 +24,15 @@ from fastapi.openapi.utils import get_openapi
 
 from service import __version__
 from service.api import api_router
+from service.api.methods import AllowedMethods
 from service.config_store import load_config_file
-from service.config_tree import ConfigDocument, ConfigError
+from service.config_tree import ConfigDocument, ConfigError, ConfigPatch
 from service.engine import Engine
+from service.files import remove_stale_temporaries
 from service.keys import local_endpoints
 from service.schemas import DetectionBatchIn, IngestConfig
 from service.settings import Settings, SettingsLoadError, load_settings
+from service.state_store import StateStore
 from service.stats import Stats
 from service.zenoh_io import ZenohIO
 from trackers.config import TrackerConfig
@@ -124,6 +127,9 @@ class ServiceRuntime:
                 congestion_control=s.tracks_congestion_control,
                 config_file=s.zenoh_config_file,
                 shared_memory=s.zenoh_shared_memory,
+                refuse=self.engine.refuse_unread,
+                max_payload_bytes=s.max_batch_bytes,
+                max_message_bytes=s.zenoh_max_message_bytes,
             )
             self.engine.start()
             try:
@@ -170,10 +176,22 @@ class ServiceRuntime:
         log.info("demo: started the demo client (pid %d): %s", self.demo.pid, " ".join(command[1:]))
 
 
+def _state_store(settings: Settings) -> StateStore | None:
+    """The tracker state file (restored when the engine starts), if one is set."""
+    if settings.state_file is None:
+        return None
+    return StateStore(
+        settings.state_file,
+        max_age=settings.state_max_age,
+        save_interval=settings.state_save_interval,
+    )
+
+
 def create_app(settings: Settings | None = None) -> FastAPI:
     """The service as a FastAPI app. The engine is built here (loading ``config_file`` when it
-    exists: a bad file raises :class:`~service.config_store.ConfigError`); the lifespan starts it,
-    opens Zenoh (and starts the demo client), and closes everything on shutdown."""
+    exists: a bad file raises :class:`~service.config_store.ConfigError`); the lifespan starts it
+    (restoring ``state_file`` when there is a usable one), opens Zenoh (and starts the demo
+    client), and closes everything on shutdown (saving ``state_file``)."""
     settings = settings or Settings()
     ingest_defaults = IngestConfig(
         max_detections_per_batch=settings.max_detections_per_batch,
@@ -182,6 +200,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     )
     loaded = None
     if settings.config_file is not None:
+        remove_stale_temporaries(settings.config_file)  # what a crash during a save left
         loaded = load_config_file(settings.config_file, ingest_defaults)
     tracker_config, ingest = loaded if loaded else (TrackerConfig(), ingest_defaults)
     if loaded:
@@ -193,8 +212,11 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         stats=stats,
         queue_size=settings.ingest_queue_size,
         put_timeout=settings.ingest_put_timeout,
+        max_batch_bytes=settings.max_batch_bytes,
+        queue_bytes=settings.ingest_queue_bytes,
         ingest_defaults=ingest_defaults,
         config_file=settings.config_file,
+        state_store=_state_store(settings),
     )
     token = _resolve_token(settings)
     runtime = ServiceRuntime(settings, engine)
@@ -219,6 +241,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.state.api_token = token
     app.state.runtime = runtime
     app.include_router(api_router)
+    app.add_middleware(AllowedMethods, openapi=lambda: app.openapi())
     _extend_openapi(app)
     return app
 
@@ -237,7 +260,7 @@ def _extend_openapi(app: FastAPI) -> None:
         )
         components = schema.setdefault("components", {}).setdefault("schemas", {})
         template = "#/components/schemas/{model}"
-        for model in (DetectionBatchIn, ConfigDocument, IngestConfig):
+        for model in (DetectionBatchIn, ConfigDocument, ConfigPatch, IngestConfig):
             js = model.model_json_schema(ref_template=template)
             for name, sub in js.pop("$defs", {}).items():
                 components.setdefault(name, sub)

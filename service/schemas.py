@@ -13,21 +13,30 @@ shapes as plain dicts (see :mod:`service.convert`) and serialises them with orjs
 from __future__ import annotations
 
 import re
-from typing import Annotated, Any, Literal
+from typing import Annotated, Any, Literal, NotRequired
 
 from pydantic import (
     AfterValidator,
     AllowInfNan,
     BaseModel,
     ConfigDict,
+    FailFast,
     Field,
     Strict,
     ValidationError,
     model_validator,
+    with_config,
 )
+from typing_extensions import TypedDict  # pydantic needs this one before Python 3.12
+
+from trackers.pipeline import MAX_ABS_POSITION, MAX_ABS_TIME, MAX_VARIANCE
 
 __all__ = [
+    "DETECTION_FIELDS",
     "ERROR_REASONS",
+    "MAX_ABS_AMPLITUDE",
+    "MAX_ABS_RANGE_RATE",
+    "MAX_ID_LENGTH",
     "SENSOR_ID_PATTERN",
     "BatchError",
     "DetectionBatchIn",
@@ -55,7 +64,12 @@ ERROR_REASONS: dict[str, str] = {
     "invalid_json": "the payload is not a JSON document",
     "invalid_batch": "the batch breaks the contract's rules (missing, extra or bad field)",
     "sensor_mismatch": "the batch's sensor_id differs from the last chunk of its Zenoh key",
+    "invalid_key": "the Zenoh key is not {prefix}/detections/{sensor_id} with one chunk that "
+    "is a valid sensor id; reported on {prefix}/errors/unknown",
+    "batch_too_large": "the payload is larger than max_batch_bytes; refused unread",
     "too_many_detections": "more detections than ingest.max_detections_per_batch",
+    "duplicate_batch": "byte for byte the same payload as a batch of the same sensor accepted "
+    "recently (one of its last 64): not processed twice",
     "out_of_sequence": "the batch is older than the last processed time",
     "time_jump": "the batch's time is further ahead of the last processed time than "
     "ingest.max_time_jump allows",
@@ -75,6 +89,30 @@ def valid_sensor_id(value: str) -> bool:
 #: A JSON number (not a bool, not a string), finite.
 Finite = Annotated[float, Strict(), AllowInfNan(False)]
 
+#: The largest magnitude of a batch's time (s): about 31,700 years from the epoch.
+#: Nanoseconds or milliseconds since 1970 sent as seconds are beyond it.
+#: (The tracker's own check, :func:`trackers.pipeline.check_scan`, uses the same bound.)
+#: Positions and covariance entries have the tracker's bounds too: ``MAX_ABS_POSITION`` (m)
+#: and ``MAX_VARIANCE`` (m²), beyond which the arithmetic of gating overflows.
+#: The largest magnitude of a range-rate (m/s): about the speed of light.
+MAX_ABS_RANGE_RATE = 3e8
+#: The largest magnitude of an amplitude (any unit: dB or linear).
+MAX_ABS_AMPLITUDE = 1e12
+#: The longest detection id (characters); ids are echoed back in every Track report.
+MAX_ID_LENGTH = 256
+
+
+def _bounded(limit: float) -> Any:
+    """A finite JSON number within ``[-limit, limit]``."""
+    return Annotated[float, Strict(), AllowInfNan(False), Field(ge=-limit, le=limit)]
+
+
+Time = _bounded(MAX_ABS_TIME)
+Position = _bounded(MAX_ABS_POSITION)
+Variance = _bounded(MAX_VARIANCE)
+RangeRate = _bounded(MAX_ABS_RANGE_RATE)
+Amplitude = _bounded(MAX_ABS_AMPLITUDE)
+
 
 def _check_spd(cov: tuple[tuple[float, float], tuple[float, float]]) -> Any:
     (a, b), (c, d) = cov
@@ -84,29 +122,48 @@ def _check_spd(cov: tuple[tuple[float, float], tuple[float, float]]) -> Any:
 
 
 #: A 2x2 symmetric positive definite matrix given as ``[[a, b], [b, d]]``.
-Cov2 = Annotated[tuple[tuple[Finite, Finite], tuple[Finite, Finite]], AfterValidator(_check_spd)]
+Cov2 = Annotated[
+    tuple[tuple[Variance, Variance], tuple[Variance, Variance]], AfterValidator(_check_spd)
+]
+
+#: Unknown fields are refused, but found after validation (:meth:`DetectionBatchIn._after`):
+#: refused field by field, a payload of many unknown keys would cost one error each. The
+#: schema still says ``additionalProperties: false``.
+_NO_EXTRA: dict[str, Any] = {"additionalProperties": False}
 
 
-class DetectionIn(BaseModel):
+# A plain dict once validated (a third cheaper to validate than a model): an optional field
+# is absent when the detection has none, or None.
+@with_config(ConfigDict(extra="allow", json_schema_extra=_NO_EXTRA))
+class DetectionIn(TypedDict):
     """One detection: a measured position with optional covariance, range-rate, amplitude, id."""
 
-    model_config = ConfigDict(extra="forbid", frozen=True)
+    x: Annotated[Position, Field(description="east position, m")]
+    y: Annotated[Position, Field(description="north position, m")]
+    cov: NotRequired[Annotated[Cov2 | None, Field(description="2x2 position covariance, m² (SPD)")]]
+    vr: NotRequired[
+        Annotated[RangeRate | None, Field(description="range-rate, m/s (needs sensor_position)")]
+    ]
+    amplitude: NotRequired[Amplitude | None]
+    id: NotRequired[
+        Annotated[
+            Annotated[str, Strict(), Field(max_length=MAX_ID_LENGTH)] | None,
+            Field(description="echoed back in tracks"),
+        ]
+    ]
 
-    x: Finite = Field(description="east position, m")
-    y: Finite = Field(description="north position, m")
-    cov: Cov2 | None = Field(default=None, description="2x2 position covariance, m² (SPD)")
-    vr: Finite | None = Field(default=None, description="range-rate, m/s (needs sensor_position)")
-    amplitude: Finite | None = None
-    id: Annotated[str, Strict()] | None = Field(default=None, description="echoed back in tracks")
+
+DETECTION_FIELDS = frozenset(DetectionIn.__annotations__)
 
 
 class DetectionBatchIn(BaseModel):
     """One sensor's detections at one time (the contract's Detection batch)."""
 
     model_config = ConfigDict(
-        extra="forbid",
+        extra="allow",
         frozen=True,
         json_schema_extra={
+            **_NO_EXTRA,
             "examples": [
                 {
                     "sensor_id": "radar-1",
@@ -115,25 +172,40 @@ class DetectionBatchIn(BaseModel):
                     "cov": [[25, 0], [0, 25]],
                     "pd": 0.9,
                 }
-            ]
+            ],
         },
     )
 
     sensor_id: Annotated[str, Strict(), Field(pattern=SENSOR_ID_PATTERN)]
-    time: Finite = Field(description="seconds on the shared epoch")
-    detections: list[DetectionIn]
+    time: Time = Field(description="seconds on the shared epoch")
+    # fail fast: a list of bad detections costs one detection's errors, not one per item
+    detections: Annotated[list[DetectionIn], FailFast()]
     cov: Cov2 | None = Field(default=None, description="default covariance of the detections, m²")
-    sensor_position: tuple[Finite, Finite] | None = None
+    sensor_position: tuple[Position, Position] | None = Field(
+        default=None, description="[x, y] of the sensor, m (for range-rates)"
+    )
     pd: Annotated[Finite, Field(gt=0.0, le=1.0)] | None = None
-    clutter_density: Annotated[Finite, Field(gt=0.0)] | None = Field(
+    clutter_density: Annotated[Finite, Field(gt=0.0, le=1.0)] | None = Field(
         default=None, description="false-alarm density per m²"
     )
 
     @model_validator(mode="after")
-    def _vr_needs_sensor_position(self) -> DetectionBatchIn:
-        if self.sensor_position is None:
-            for i, det in enumerate(self.detections):
-                if det.vr is not None:
+    def _after(self) -> DetectionBatchIn:
+        """No unknown field, in the batch or a detection; range-rates only with the sensor's
+        position."""
+        extra = self.__pydantic_extra__
+        if extra:
+            raise ValueError(f"{next(iter(extra))}: unknown field")
+        dets = self.detections
+        keys = set().union(*dets)  # every key of every detection, gathered in C
+        if not keys <= DETECTION_FIELDS:  # the place only when there is one
+            for i, det in enumerate(dets):
+                for key in det:
+                    if key not in DETECTION_FIELDS:
+                        raise ValueError(f"detections[{i}].{key}: unknown field")
+        if self.sensor_position is None and "vr" in keys:
+            for i, det in enumerate(dets):
+                if det.get("vr") is not None:
                     raise ValueError(f"detections[{i}].vr: needs the batch's sensor_position")
         return self
 
@@ -162,6 +234,7 @@ _MESSAGES = {
     "dict_type": "not an object",
     "too_long": "too many items",
     "too_short": "too few items",
+    "string_too_long": "longer than {max_length} characters",
     "greater_than": "must be > {gt}",
     "less_than_equal": "must be <= {le}",
     "greater_than_equal": "must be >= {ge}",
@@ -178,11 +251,20 @@ def _location(loc: tuple[int | str, ...]) -> str:
     return out
 
 
-def format_validation_error(exc: ValidationError) -> str:
+def _shown(value: Any) -> Any:
+    """A bound as an error message shows it: ``1.0``, but ``1e+09`` rather than
+    ``1000000000.0``."""
+    if isinstance(value, float) and abs(value) >= 1e6:
+        return f"{value:g}"
+    return value
+
+
+def format_validation_error(exc: ValidationError, errors: list[Any] | None = None) -> str:
     """The first error of ``exc`` as ``"place: what is wrong"`` (``"; "``-joined if several,
-    at most three)."""
+    at most three). ``errors``: ``exc.errors()``, if the caller has it already."""
     parts: list[str] = []
-    errors = exc.errors(include_url=False, include_input=False)
+    if errors is None:
+        errors = exc.errors(include_url=False, include_input=False)
     for err in errors[:3]:
         kind = err["type"]
         loc = err["loc"]
@@ -194,7 +276,8 @@ def format_validation_error(exc: ValidationError) -> str:
         else:
             template = _MESSAGES.get(kind)
             try:
-                msg = template.format(**err.get("ctx", {})) if template else err["msg"]
+                ctx = {k: _shown(v) for k, v in err.get("ctx", {}).items()}
+                msg = template.format(**ctx) if template else err["msg"]
             except (KeyError, IndexError):
                 msg = err["msg"]
         # A cov's SPD check reports at the cov itself; a tuple's shape errors one level down.
@@ -210,16 +293,18 @@ def decode_batch(payload: bytes | str) -> DetectionBatchIn:
 
     JSON ``NaN``/``Infinity`` literals parse, then fail the finiteness rule with a precise
     place; unparseable text is ``invalid_json``; everything else is ``invalid_batch``.
+    Validation stops at the first bad detection, so the errors of one payload are few; what
+    the payload may cost before that is bounded by :func:`service.payload.check_cost`.
     """
     try:
         return DetectionBatchIn.model_validate_json(payload)
     except ValidationError as exc:
         errors = exc.errors(include_url=False, include_input=False)
         if errors and errors[0]["type"] == "json_invalid":
-            raise BatchError("invalid_json", format_validation_error(exc)) from None
+            raise BatchError("invalid_json", format_validation_error(exc, errors)) from None
         if errors and errors[0]["type"] == "model_type" and not errors[0]["loc"]:
             raise BatchError("invalid_batch", "the batch must be a JSON object") from None
-        raise BatchError("invalid_batch", format_validation_error(exc)) from None
+        raise BatchError("invalid_batch", format_validation_error(exc, errors)) from None
 
 
 # -- output ---------------------------------------------------------------------------------

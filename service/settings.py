@@ -17,7 +17,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Annotated, Any, Literal
 
-from pydantic import Field, SecretStr, ValidationError, field_validator
+from pydantic import Field, SecretStr, ValidationError, ValidationInfo, field_validator
 from pydantic.fields import FieldInfo
 from pydantic_settings import (
     BaseSettings,
@@ -27,6 +27,7 @@ from pydantic_settings import (
 )
 
 from service.keys import DEFAULT_PREFIX
+from service.payload import DEFAULT_MAX_BATCH_BYTES, DEFAULT_QUEUE_BYTES
 from service.schemas import MAX_REORDER_WINDOW, IngestConfig
 
 __all__ = ["Settings", "SettingsLoadError", "build_parser", "load_settings", "split_endpoints"]
@@ -93,6 +94,14 @@ class Settings(BaseSettings):
             "memory per publisher run)"
         ),
     )
+    zenoh_max_message_bytes: int = Field(
+        default=64 * 1024 * 1024,
+        ge=1024,
+        description=(
+            "largest Zenoh message the service's transport reassembles, bytes; a larger one "
+            "is dropped by Zenoh as it arrives, with no Error report (at least max_batch_bytes)"
+        ),
+    )
     key_prefix: str = Field(
         default=DEFAULT_PREFIX, description="first chunk(s) of every key expression"
     )
@@ -109,6 +118,27 @@ class Settings(BaseSettings):
         default=None,
         description="tracker configuration JSON: loaded at start, saved on each change",
     )
+    state_file: Path | None = Field(
+        default=None,
+        description=(
+            "tracker state file (tracks, ids, two-point candidates, last time, report seq): "
+            "saved atomically every state_save_interval seconds and at shutdown, restored "
+            "at start when younger than state_max_age; none: every start begins with no tracks"
+        ),
+    )
+    state_save_interval: float = Field(
+        default=10.0,
+        ge=0,
+        le=86400,
+        allow_inf_nan=False,
+        description="seconds between saves of the state file (0: only at shutdown)",
+    )
+    state_max_age: float = Field(
+        default=300.0,
+        gt=0,
+        allow_inf_nan=False,
+        description="a state file saved longer ago than this (s, wall clock) is not restored",
+    )
     ingest_queue_size: int = Field(
         default=1024, ge=1, description="batches waiting for the tracker"
     )
@@ -117,6 +147,22 @@ class Settings(BaseSettings):
         gt=0,
         le=3600,
         description="seconds a full queue may block a sender before a drop",
+    )
+    ingest_queue_bytes: int = Field(
+        default=DEFAULT_QUEUE_BYTES,
+        ge=1024,
+        description=(
+            "payload bytes waiting for the tracker at most; a sender waits for room as for a "
+            "full queue (at least max_batch_bytes)"
+        ),
+    )
+    max_batch_bytes: int = Field(
+        default=DEFAULT_MAX_BATCH_BYTES,
+        ge=1024,
+        description=(
+            "largest detection batch payload, bytes: a larger one is refused unread "
+            "(batch_too_large); the default holds 10,000 detections with every field"
+        ),
     )
     # The ingest section's defaults: written once, in service.schemas.IngestConfig.
     max_detections_per_batch: int = Field(
@@ -175,11 +221,28 @@ class Settings(BaseSettings):
             raise ValueError("must be 1 to 64 of A-Z a-z 0-9 _ . -")
         return value
 
+    @field_validator("state_file")
+    @classmethod
+    def _check_state_file(cls, value: Path | None, info: ValidationInfo) -> Path | None:
+        config = info.data.get("config_file")
+        if value is not None and config is not None and value.resolve() == config.resolve():
+            raise ValueError("must not be the config_file")
+        return value
+
     @field_validator("api_token")
     @classmethod
     def _check_token(cls, value: SecretStr | None) -> SecretStr | None:
         if value is not None and not value.get_secret_value().strip():
             return None
+        return value
+
+    @field_validator("max_batch_bytes")
+    @classmethod
+    def _check_batch_bytes(cls, value: int, info: ValidationInfo) -> int:
+        for name in ("zenoh_max_message_bytes", "ingest_queue_bytes"):
+            other = info.data.get(name)
+            if isinstance(other, int) and value > other:
+                raise ValueError(f"must not be more than {name} ({other})")
         return value
 
     @classmethod

@@ -187,6 +187,13 @@ class Stats:
             self.tracks_confirmed = confirmed
             self._times.append(processing_ms)
 
+    def restored(self, seq: int, time_: float, confirmed: int) -> None:
+        """The report counter, time and confirmed tracks of a state restored at start."""
+        with self._lock:
+            self.seq = seq
+            self.last_time = time_
+            self.tracks_confirmed = confirmed
+
     # -- reading --------------------------------------------------------------------------
 
     def uptime(self) -> float:

@@ -34,17 +34,20 @@ def _field(
     lt: float | None = None,
     le: float | None = None,
     choices: tuple[str, ...] | None = None,
+    length: tuple[int, int] | None = None,
 ) -> Any:
     """A config field with its default, its description and its bounds (or allowed values),
     read by :func:`_check_bounds` and by whoever shows the configuration (the service derives
     its document schema from them). A number outside its bounds is one the tracker cannot
-    run with, so every number has them."""
+    run with, so every number has them; a list has its ``length`` bounds (fewest, most)."""
     meta: dict[str, Any] = {"description": description}
     for key, bound in (("gt", gt), ("ge", ge), ("lt", lt), ("le", le)):
         if bound is not None:
             meta[key] = bound
     if choices is not None:
         meta["choices"] = tuple(choices)
+    if length is not None:
+        meta["length"] = length
     return field(default=default, metadata=meta)
 
 
@@ -88,6 +91,7 @@ class MotionConfig:
         ("cv", "ct"),
         'the IMM modes: "cv" (nearly constant velocity) and/or "ct" (coordinated turn), in order',
         choices=("cv", "ct"),
+        length=(1, 2),
     )
     q_cv: float = _field(
         0.5, "acceleration noise PSD of the constant-velocity mode, m²/s³", gt=0, le=1e4
@@ -99,10 +103,14 @@ class MotionConfig:
         1e-3, "turn-rate noise PSD of the coordinated-turn mode, rad²/s³", gt=0, le=1.0
     )
     sojourn_times: tuple[float, ...] = _field(
-        (30.0, 10.0), "mean time spent in each mode, s (one per model)", gt=0, le=1e6
+        (30.0, 10.0), "mean time spent in each mode, s (one per model)", gt=0, le=1e6, length=(1, 2)
     )
     initial_mode_probabilities: tuple[float, ...] = _field(
-        (0.9, 0.1), "a new track's mode probabilities (one per model, summing to 1)", ge=0, le=1
+        (0.9, 0.1),
+        "a new track's mode probabilities (one per model, summing to 1)",
+        ge=0,
+        le=1,
+        length=(1, 2),
     )
 
     def __post_init__(self) -> None:

@@ -22,6 +22,7 @@ One step, for a scan at time t with detections z_j (covariances R_j):
 
 from __future__ import annotations
 
+import re
 from collections.abc import Sequence
 from dataclasses import dataclass, fields, replace
 
@@ -37,9 +38,10 @@ from trackers.models.motion import STATE_DIM, build_models
 from trackers.peers import PointDirectives, PointProposal, PointTrackState, PointTrackView
 from trackers.rows import RowArrays, sort_within_groups
 from trackers.scoring import hit_increment, initial_score, miss_increment, sequential_test
+from trackers.state import SectionReader, StateError, StateSection, pack_strings
 from trackers.types import Scan, StepResult, TrackSnapshot
 
-__all__ = ["IndividualTracker", "TrackArrays"]
+__all__ = ["Checkpoint", "IndividualTracker", "TrackArrays"]
 
 KIND = "individual"
 
@@ -217,14 +219,7 @@ class IndividualTracker:
         models = build_models(config.motion)
         tracks = st.tracks
         if config.motion.models != st.config.motion.models:
-            M = len(models)
-            mu0 = np.asarray(config.motion.initial_mode_probabilities)
-            tracks = replace(
-                tracks,
-                x=np.repeat(tracks.x_comb[:, None, :], M, axis=1),
-                P=np.repeat(tracks.P_comb[:, None, :, :], M, axis=1),
-                mu=np.tile(mu0, (len(tracks), 1)),
-            )
+            tracks = _remoded(tracks, config)
         return config, models, tracks
 
     # -- the step ------------------------------------------------------------------------
@@ -540,6 +535,203 @@ class IndividualTracker:
         names = tuple(m.name for m in st.models)
         t = st.time if st.time is not None else 0.0
         return _snapshots(st.tracks, names, t, confirmed_only=confirmed_only)
+
+    # -- saving and restoring (trackers.peers.PersistentTracker) -----------------------------
+
+    def checkpoint(self) -> Checkpoint:
+        """The committed state, to export later on any thread (free: it is immutable)."""
+        return Checkpoint(self._state)
+
+    def export_state(self) -> StateSection:
+        """The committed state as plain data (:class:`Checkpoint`)."""
+        return self.checkpoint().export()
+
+    def check_state(self, section: StateSection) -> object:
+        """A section that :meth:`export_state` wrote, read and checked, ready for
+        :meth:`restore_state`; :class:`~trackers.state.StateError` when it cannot be used.
+
+        The configuration in force stays. Tracks saved under other motion models restart
+        their modes from their combined estimates, as :meth:`reconfigure` does."""
+        return _import(section, self.config)
+
+    def restore_state(self, checked: object) -> None:
+        """Put a state that :meth:`check_state` returned in place of the current one."""
+        if not isinstance(checked, _State):
+            raise TypeError("restore_state takes what check_state returned")
+        self._state = checked
+        self._pending = None
+        self._version += 1
+        self._prediction = None
+
+    def import_state(self, section: StateSection) -> None:
+        """:meth:`check_state`, then :meth:`restore_state`: the tracker goes on from the
+        saved tracks, candidates, time and id counters, or is left as it was."""
+        self.restore_state(self.check_state(section))
+
+
+@dataclass(frozen=True, eq=False)
+class Checkpoint:
+    """An :class:`IndividualTracker`'s committed state at one moment."""
+
+    state: _State
+
+    def export(self) -> StateSection:
+        """Plain data: the time, the id and origin counters, the motion models' names, and
+        every field of the tracks and the two-point candidates as arrays (ids and detection
+        ids as packed UTF-8)."""
+        st = self.state
+        tr, cand = st.tracks, st.candidates
+        groups = tr.detection_ids.tolist()
+        arrays: dict[str, np.ndarray] = {}
+        _put_strings(arrays, "tracks.ids", tr.ids.tolist())
+        _put_strings(arrays, "tracks.detection_ids", [d for g in groups for d in g])
+        arrays["tracks.detection_ids.count"] = np.fromiter(
+            map(len, groups), dtype=np.int64, count=len(groups)
+        )
+        for name in _TRACK_NUMBERS:
+            arrays[f"tracks.{name}"] = getattr(tr, name)
+        for name in _CANDIDATE_NUMBERS:
+            arrays[f"candidates.{name}"] = getattr(cand, name)
+        _put_strings(arrays, "candidates.detection_ids", cand.detection_ids.tolist())
+        values = {
+            "time": st.time,
+            "next_id": st.next_id,
+            "next_origin": st.next_origin,
+            "models": list(st.config.motion.models),
+            "n_tracks": len(tr),
+            "n_candidates": len(cand),
+        }
+        return StateSection(values, arrays)
+
+
+_TRACK_NUMBERS = (
+    "x",
+    "P",
+    "mu",
+    "x_comb",
+    "P_comb",
+    "score",
+    "peak",
+    "confirmed",
+    "hits",
+    "created",
+    "updated",
+    "origin",
+)
+_CANDIDATE_NUMBERS = ("z", "R", "time", "score", "origin")
+
+
+def _put_strings(arrays: dict[str, np.ndarray], name: str, items: list[str | None]) -> None:
+    arrays[f"{name}.utf8"], arrays[f"{name}.len"] = pack_strings(items)
+
+
+def _covariances_ok(P: np.ndarray) -> bool:
+    """Every matrix of ``P (..., d, d)`` has a positive diagonal and is symmetric to within
+    1e-6 of its largest entry."""
+    if P.size == 0:
+        return True
+    diag = np.diagonal(P, axis1=-2, axis2=-1)
+    scale = np.abs(P).max(axis=(-2, -1), keepdims=True)
+    asym = np.abs(P - np.swapaxes(P, -1, -2))
+    return bool((diag > 0).all() and (asym <= 1e-6 * scale).all())
+
+
+def _import(section: StateSection, config: TrackerConfig) -> _State:
+    """The :class:`_State` of a section that :meth:`Checkpoint.export` wrote, checked, under
+    ``config``; :class:`StateError` naming the field when it cannot be used."""
+    r = SectionReader(section, "point")
+    t = r.time("time")
+    next_id = r.integer("next_id", ge=1)
+    next_origin = r.integer("next_origin", ge=0)
+    saved_models = r.names("models")
+    n = r.integer("n_tracks", ge=0)
+    k = r.integer("n_candidates", ge=0)
+    M, D = len(saved_models), STATE_DIM
+    ids = r.strings("tracks.ids", n)
+    tracks = TrackArrays(
+        ids=_objects(ids),
+        x=r.floats("tracks.x", (n, M, D)),
+        P=r.floats("tracks.P", (n, M, D, D)),
+        mu=r.floats("tracks.mu", (n, M)),
+        x_comb=r.floats("tracks.x_comb", (n, D)),
+        P_comb=r.floats("tracks.P_comb", (n, D, D)),
+        score=r.floats("tracks.score", (n,)),
+        peak=r.floats("tracks.peak", (n,)),
+        confirmed=r.booleans("tracks.confirmed", (n,)),
+        hits=r.integers("tracks.hits", (n,), ge=0),
+        created=r.floats("tracks.created", (n,)),
+        updated=r.floats("tracks.updated", (n,)),
+        detection_ids=_objects(r.string_groups("tracks.detection_ids", n)),
+        origin=r.integers("tracks.origin", (n,), ge=0),
+    )
+    candidates = Candidates(
+        z=r.floats("candidates.z", (k, 2)),
+        R=r.floats("candidates.R", (k, 2, 2)),
+        time=r.floats("candidates.time", (k,)),
+        score=r.floats("candidates.score", (k,)),
+        detection_ids=_objects(r.strings("candidates.detection_ids", k, optional=True)),
+        origin=r.integers("candidates.origin", (k,), ge=0),
+    )
+    r.finish()
+
+    def bad(detail: str) -> StateError:
+        return StateError(f"point: {detail}")
+
+    if len(set(ids)) != n or not all(ids):
+        raise bad("track ids must be unique and not empty")
+    numbered = [int(s[1:]) for s in ids if s is not None and _NUMBERED_ID.match(s)]
+    if numbered and max(numbered) >= next_id:
+        raise bad(f"next_id {next_id} would give again the id T{max(numbered)}")
+    origins = np.concatenate([tracks.origin, candidates.origin])
+    if origins.size and int(origins.max()) >= next_origin:
+        raise bad(f"next_origin {next_origin} is not above every origin ({int(origins.max())})")
+    if (n or k) and t is None:
+        raise bad("tracks or candidates without the time of the last scan")
+    if n:
+        assert t is not None
+        if (tracks.created > tracks.updated).any() or (tracks.updated > t).any():
+            raise bad("track times must satisfy created <= updated <= time")
+        mu = tracks.mu
+        if (mu < 0).any() or (mu > 1).any() or (np.abs(mu.sum(axis=1) - 1.0) > 1e-6).any():
+            raise bad("mode probabilities must be in [0, 1] and sum to 1")
+        if (tracks.peak < tracks.score).any():
+            raise bad("a track's peak score is below its score")
+        if not (_covariances_ok(tracks.P) and _covariances_ok(tracks.P_comb)):
+            raise bad("a track covariance is not symmetric with a positive diagonal")
+    if k:
+        assert t is not None
+        if (candidates.time > t).any():
+            raise bad("a candidate is later than the last scan")
+        R = candidates.R
+        if not _covariances_ok(R) or (R[:, 0, 0] * R[:, 1, 1] - R[:, 0, 1] ** 2 <= 0).any():
+            raise bad("a candidate covariance is not symmetric positive definite")
+    if saved_models != config.motion.models:
+        tracks = _remoded(tracks, config)
+    return _State(
+        config=config,
+        models=build_models(config.motion),
+        tracks=_frozen(tracks),
+        candidates=candidates,
+        time=t,
+        next_id=next_id,
+        next_origin=next_origin,
+    )
+
+
+_NUMBERED_ID = re.compile(r"^T[0-9]{1,18}$")
+
+
+def _remoded(tracks: TrackArrays, config: TrackerConfig) -> TrackArrays:
+    """``tracks`` under the motion models of ``config``: each restarts every mode from its
+    combined estimate, with the configured initial mode probabilities."""
+    M = len(config.motion.models)
+    mu0 = np.asarray(config.motion.initial_mode_probabilities)
+    return replace(
+        tracks,
+        x=np.repeat(tracks.x_comb[:, None, :], M, axis=1),
+        P=np.repeat(tracks.P_comb[:, None, :, :], M, axis=1),
+        mu=np.tile(mu0, (len(tracks), 1)),
+    )
 
 
 def _new_tracks(

@@ -44,10 +44,11 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any, Protocol
+from typing import TYPE_CHECKING, Any, Protocol, runtime_checkable
 
 import numpy as np
 
+from trackers.state import StateSection
 from trackers.types import Scan, StepResult, TrackSnapshot
 
 if TYPE_CHECKING:
@@ -57,12 +58,14 @@ __all__ = [
     "PeerError",
     "PeerProposal",
     "PeerTracker",
+    "PersistentTracker",
     "PointDirectives",
     "PointProposal",
     "PointTrackState",
     "PointTrackView",
     "PointTracker",
     "ResolutionCell",
+    "StateCheckpoint",
     "check_proposal",
     "combine_directives",
 ]
@@ -205,6 +208,35 @@ class PeerTracker(Protocol):
     def snapshot(self) -> tuple[TrackSnapshot, ...]: ...
 
     def reconfigure(self, config: TrackerConfig) -> None: ...
+
+
+class StateCheckpoint(Protocol):
+    """A tracker's state as it was at one moment, turned into plain data later, on any
+    thread (:mod:`trackers.state`)."""
+
+    def export(self) -> StateSection: ...
+
+
+@runtime_checkable
+class PersistentTracker(Protocol):
+    """Optional, for peers and point trackers: a tracker whose state survives a restart.
+
+    ``checkpoint`` is called between scans and must cost next to nothing (hold the state's
+    immutable parts; the work is in :meth:`StateCheckpoint.export`), and must stay valid
+    however the tracker moves on. ``check_state`` reads a section that an export wrote and
+    returns it checked (shapes, finite numbers, consistent lengths), raising
+    :class:`~trackers.state.StateError` without changing anything; ``restore_state`` puts a
+    checked state in place and must not fail, so that the pipeline restores all of its
+    trackers or none. The configuration in force stays; a saved state made under another one
+    is adapted to it or refused. A peer without these methods is not saved: it starts empty
+    after a restart.
+    """
+
+    def checkpoint(self) -> StateCheckpoint: ...
+
+    def check_state(self, section: StateSection) -> Any: ...
+
+    def restore_state(self, checked: Any) -> None: ...
 
 
 @dataclass(frozen=True)

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Sequence
+from typing import Any
 
 import numpy as np
 
@@ -24,17 +25,22 @@ from trackers.peers import (
     PeerError,
     PeerProposal,
     PeerTracker,
+    PersistentTracker,
     PointDirectives,
     PointTracker,
+    StateCheckpoint,
     check_proposal,
     combine_directives,
 )
+from trackers.state import PipelineState, StateError
 from trackers.types import Scan, ScanRejected, StepResult, TrackSnapshot
 
 __all__ = [
     "MAX_ABS_POSITION",
+    "MAX_ABS_TIME",
     "MAX_VARIANCE",
     "POINT_TRACKERS",
+    "PipelineCheckpoint",
     "TrackingPipeline",
     "check_scan",
     "make_point_tracker",
@@ -45,6 +51,9 @@ __all__ = [
 MAX_ABS_POSITION = 1e9
 #: Largest magnitude of a detection covariance entry (m²): a standard deviation of 10,000 km.
 MAX_VARIANCE = 1e14
+#: Largest magnitude of a scan's time (s): about 31,700 years from the epoch, so differences
+#: of times keep a resolution of 0.1 ms.
+MAX_ABS_TIME = 1e12
 
 
 #: The point trackers by ``association.method``.
@@ -59,12 +68,15 @@ def make_point_tracker(config: TrackerConfig) -> PointTracker:
 def check_scan(scan: Scan, last_time: float | None) -> None:
     """Raise :class:`ScanRejected` unless the scan's numbers are usable and in time order.
 
-    Checks: finite time not older than ``last_time``; finite positions with
-    ``|x|, |y| ≤ MAX_ABS_POSITION``; symmetric positive definite covariances with entries
-    ``≤ MAX_VARIANCE`` in magnitude; ``pd`` in (0, 1] and ``clutter_density`` > 0 when given.
+    Checks: finite time within ``±MAX_ABS_TIME`` not older than ``last_time``; finite
+    positions with ``|x|, |y| ≤ MAX_ABS_POSITION``; symmetric positive definite covariances
+    with entries ``≤ MAX_VARIANCE`` in magnitude; ``pd`` in (0, 1] and ``clutter_density``
+    > 0 when given.
     """
     if not math.isfinite(scan.time):
         raise ScanRejected("invalid_scan", "time: not a finite number")
+    if abs(scan.time) > MAX_ABS_TIME:
+        raise ScanRejected("invalid_scan", f"time: beyond ±{MAX_ABS_TIME:g} s")
     if last_time is not None and scan.time < last_time:
         raise ScanRejected(
             "out_of_sequence",
@@ -102,6 +114,31 @@ def check_scan(scan: Scan, last_time: float | None) -> None:
         math.isfinite(scan.clutter_density) and scan.clutter_density > 0
     ):
         raise ScanRejected("invalid_scan", "clutter_density: must be a finite number > 0")
+
+
+class PipelineCheckpoint:
+    """The pipeline's state at one moment (:meth:`TrackingPipeline.checkpoint`), turned into
+    plain data by :meth:`export`, later and on any thread."""
+
+    def __init__(
+        self,
+        last_time: float | None,
+        point_kind: str,
+        point: StateCheckpoint,
+        peers: tuple[tuple[str, StateCheckpoint], ...],
+    ) -> None:
+        self.last_time = last_time
+        self.point_kind = point_kind
+        self._point = point
+        self._peers = peers
+
+    def export(self) -> PipelineState:
+        return PipelineState(
+            last_time=self.last_time,
+            point_kind=self.point_kind,
+            point=self._point.export(),
+            peers={kind: cp.export() for kind, cp in self._peers},
+        )
 
 
 class TrackingPipeline:
@@ -184,6 +221,59 @@ class TrackingPipeline:
                 (peer_confirmed if confirmed_only else peer_all) + result.snapshot(confirmed_only)
             ),
         )
+
+    # -- saving and restoring --------------------------------------------------------------
+
+    def checkpoint(self) -> PipelineCheckpoint:
+        """The state between scans, to export later (:class:`PipelineCheckpoint`): it costs a
+        few attribute reads, since every tracker's state is immutable. Peers that cannot be
+        saved (:class:`~trackers.peers.PersistentTracker`) are left out. Raises
+        :class:`~trackers.state.StateError` when the point tracker cannot be saved."""
+        point = self.point
+        take = getattr(point, "checkpoint", None)  # cheaper than an isinstance on a Protocol
+        if take is None:
+            raise StateError(f"the point tracker {point.kind!r} cannot save its state")
+        peers = tuple(
+            (peer.kind, peer.checkpoint())
+            for peer in self.peers
+            if isinstance(peer, PersistentTracker)
+        )
+        return PipelineCheckpoint(self._last_time, point.kind, take(), peers)
+
+    def export_state(self) -> PipelineState:
+        """The state as plain data (:mod:`trackers.state`)."""
+        return self.checkpoint().export()
+
+    def import_state(self, state: PipelineState) -> None:
+        """Go on from a saved state: every tracker checks its section, then all restore, so a
+        bad section (:class:`~trackers.state.StateError`, saying why) changes nothing. The
+        configuration in force stays; the last processed time comes back, so scans older
+        than the saved ones stay out of sequence. A peer the file has no section for keeps
+        its state (empty at start-up); a section for a peer kind this pipeline does not run
+        is refused."""
+        point = self.point
+        if state.point_kind != point.kind:
+            raise StateError(
+                f"the saved point tracker is {state.point_kind!r}; this one is {point.kind!r}"
+            )
+        if not isinstance(point, PersistentTracker):
+            raise StateError(f"the point tracker {point.kind!r} cannot restore a state")
+        last = state.last_time
+        if last is not None and not math.isfinite(last):
+            raise StateError(f"last_time: not a finite number: {last!r}")
+        point_time = state.point.values.get("time")
+        if isinstance(point_time, int | float) and (last is None or not point_time <= last):
+            raise StateError(f"the point tracker's time {point_time!r} is after {last!r}")
+        peers = {p.kind: p for p in self.peers}
+        checked: list[tuple[PersistentTracker, Any]] = [(point, point.check_state(state.point))]
+        for kind, section in state.peers.items():
+            peer = peers.get(kind)
+            if not isinstance(peer, PersistentTracker):
+                raise StateError(f"the saved state holds peer {kind!r}, which is not running")
+            checked.append((peer, peer.check_state(section)))
+        for tracker, value in checked:
+            tracker.restore_state(value)
+        self._last_time = last
 
     def snapshot(self) -> tuple[TrackSnapshot, ...]:
         """Every live track of every kind, as of the last processed scan."""

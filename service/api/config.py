@@ -23,21 +23,26 @@ __all__ = ["router"]
 router = APIRouter(prefix="/config", tags=["config"])
 
 
-def _body(description: str) -> dict[str, Any]:
+def _body(model: str, description: str) -> dict[str, Any]:
     return {
         "requestBody": {
             "required": True,
             "description": description,
-            "content": {
-                "application/json": {"schema": {"$ref": "#/components/schemas/ConfigDocument"}}
-            },
+            "content": {"application/json": {"schema": {"$ref": f"#/components/schemas/{model}"}}},
         }
     }
 
 
 _WRITE_RESPONSES: dict[int | str, dict[str, Any]] = {
     401: {"description": "no or a wrong bearer token"},
-    422: {"description": "invalid: `detail` names the field; nothing changed"},
+    422: {
+        "description": (
+            "invalid: `detail` names the field; nothing changed. Besides the schema's types "
+            "and bounds, rules across fields: `motion`'s lists have one entry per model and "
+            "its mode probabilities sum to 1; the confirmation threshold (from "
+            "`p_false_confirm`, `p_true_delete`) must exceed the deletion threshold"
+        )
+    },
 }
 
 
@@ -68,7 +73,7 @@ async def _apply(method: Any, doc: Any) -> Response:
     "",
     response_model=ConfigDocument,
     summary="Replace the configuration (missing fields take their defaults)",
-    openapi_extra=_body("the whole configuration document"),
+    openapi_extra=_body("ConfigDocument", "the whole configuration document"),
     responses=_WRITE_RESPONSES,
 )
 async def put_config(request: Request, engine: EngineDep, _auth: WriteAccess) -> Response:
@@ -79,7 +84,9 @@ async def put_config(request: Request, engine: EngineDep, _auth: WriteAccess) ->
     "",
     response_model=ConfigDocument,
     summary="Change some fields (JSON merge patch: null resets a field to its default)",
-    openapi_extra=_body("the fields to change, nested as in the document"),
+    openapi_extra=_body(
+        "ConfigPatch", "the fields to change, nested as in the document; null resets one"
+    ),
     responses=_WRITE_RESPONSES,
 )
 async def patch_config(request: Request, engine: EngineDep, _auth: WriteAccess) -> Response:

@@ -23,7 +23,7 @@ def test_validate_takes_defaults_and_names_the_field() -> None:
     assert (ingest.max_time_jump, ingest.reorder_window) == (5.0, 2.0)
     with pytest.raises(ConfigError, match=r"^config: expected a JSON object"):
         validate_config_document([], defaults)
-    with pytest.raises(ConfigError, match=r"^ingest: expected an object"):
+    with pytest.raises(ConfigError, match=r"^ingest: not an object"):
         validate_config_document({"ingest": 3}, defaults)
     with pytest.raises(ConfigError, match=r"^ingest\.max_detections_per_batch"):
         validate_config_document({"ingest": {"max_detections_per_batch": 0}}, defaults)

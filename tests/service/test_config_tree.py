@@ -128,6 +128,8 @@ def test_round_trip_through_the_store_and_its_file(tmp_path: Path):
     assert config_document(*loaded) == doc
     with pytest.raises(ConfigError):
         store.patch({"motion": {"q_ct": "3"}})
+    with pytest.raises(ConfigError, match="nonsense"):  # null removes a field, but a known one
+        store.patch({"nonsense": None})
     assert load_config_file(path, IngestConfig()) == loaded  # the file did not change
 
 

@@ -4,6 +4,7 @@ payload peeking; on their own, and through a running engine with the real pipeli
 from __future__ import annotations
 
 import logging
+import threading
 import time
 from concurrent.futures import Future
 from typing import Any
@@ -13,10 +14,13 @@ import pytest
 
 from service.engine import Engine
 from service.ingest import (
+    PEEK_PARSE_UP_TO,
     IngestResult,
     Item,
+    RecentBatches,
     Refusals,
     ReorderBuffer,
+    batch_digest,
     check_batch,
     peek,
     time_jump_detail,
@@ -24,6 +28,8 @@ from service.ingest import (
 from service.reports import ReportOut
 from service.schemas import BatchError, DetectionBatchIn, IngestConfig
 from service.stats import Stats
+from trackers.pipeline import TrackingPipeline
+from trackers.types import Scan, StepResult
 
 from .helpers import ListSink, batch_payload, run_batches
 
@@ -161,6 +167,18 @@ def test_drops_are_logged_at_most_once_a_second(caplog: pytest.LogCaptureFixture
         (b"[1, 2]", (None, None)),
         (b"\xff\xfe garbage", (None, None)),
         (b"[" * 100_000, (None, None)),
+        # an integer of 400 digits is no float (the standard parser reads it; float() fails)
+        (b'{"sensor_id": "s-9", "time": 1' + b"0" * 399 + b"}", ("s-9", None)),
+        (b'{"sensor_id": "s-9", "time": -1' + b"0" * 399 + b".5e3}", ("s-9", None)),
+        (b'{"sensor_id": "s-9", "time": 1e999}', ("s-9", None)),
+        # a large payload is searched, not parsed
+        (
+            b'{"sensor_id": "big-1", "time": 12.5e2, "detections": ['
+            + b'{"x": 1, "y": 2},' * (PEEK_PARSE_UP_TO // 16)
+            + b"]}",
+            ("big-1", 1250.0),
+        ),
+        (b'{"time": 1' + b"0" * 399 + b', "x": "' + b"a" * PEEK_PARSE_UP_TO + b'"}', (None, None)),
     ],
 )
 def test_peek_reads_what_it_can(payload: bytes, expected: tuple[Any, Any]) -> None:
@@ -187,13 +205,18 @@ def test_error_report_names_what_it_can(engine: Engine, sink: ListSink) -> None:
 def test_a_time_far_ahead_is_refused_and_blocks_nothing(
     engine: Engine, sink: ListSink, scans: list[Any]
 ) -> None:
-    """A clock gone wrong (nanoseconds for seconds) would put every later batch out of
-    sequence; it is refused, and the right times go on."""
+    """A clock gone wrong (a year ahead) would put every later batch out of sequence; it is
+    refused, and the right times go on. Nanoseconds sent as seconds are beyond any time a
+    batch may have."""
     run_batches(engine, [batch_payload(s) for s in scans[:3]])
     before = engine.latest_report_bytes()
-    bad = engine.submit(batch_payload(scans[3], time=1.7e18), "radar-1", "t").result(timeout=10)
+    ahead = scans[3].time + 3.2e7
+    bad = engine.submit(batch_payload(scans[3], time=ahead), "radar-1", "t").result(timeout=10)
     assert bad.error is not None and bad.error["error"] == "time_jump"
     assert "ingest.max_time_jump = 3600.0 s" in bad.error["detail"]
+    nanos = engine.submit(batch_payload(scans[3], time=1.7e18), "radar-1", "t").result(10)
+    assert nanos.error is not None and nanos.error["error"] == "invalid_batch"
+    assert nanos.error["detail"] == "time: must be <= 1e+12"
     assert engine.latest_report_bytes() == before
     assert all(r.accepted for r in run_batches(engine, [batch_payload(s) for s in scans[3:6]]))
     # a jump within max_time_jump is a pause, not an error
@@ -257,4 +280,151 @@ def test_reorder_window_releases_after_wall_time(sink: ListSink, scans: list[Any
         assert fut.result(timeout=5).accepted
         assert 0.25 <= time.monotonic() - t0 < 2.0
     finally:
+        eng.stop()
+
+
+def _counters_agree(engine: Engine) -> None:
+    s = engine.stats.snapshot()
+    assert s["batches_received"] == (
+        s["batches_processed"] + s["batches_rejected"] + s["batches_dropped"]
+    ), s
+
+
+def test_a_time_of_400_digits_is_one_error_and_the_counters_agree(
+    engine: Engine, sink: ListSink, scans: list[Any]
+) -> None:
+    """It overflowed the float of the Error report's time: the refusal raised, was counted
+    again as internal_error, and the received and refused counts parted."""
+    run_batches(engine, [batch_payload(s) for s in scans[:2]])
+    huge = b"1" + b"0" * 399
+    payload = batch_payload(scans[2]).replace(
+        orjson.dumps({"time": scans[2].time})[1:-1], b'"time":' + huge, 1
+    )
+    assert huge in payload
+    result = engine.submit(payload, "radar-1", "zenoh").result(timeout=10)
+    assert result.error is not None
+    assert (result.error["error"], result.error["detail"]) == (
+        "invalid_batch",
+        "time: not a finite number",
+    )
+    assert result.error["time"] is None
+    assert [e["error"] for _, e in sink.errors] == ["invalid_batch"]
+    _counters_agree(engine)
+    assert engine.stats.snapshot()["rejected_by_reason"] == {"invalid_batch": 1}
+
+
+def test_a_batch_sent_twice_is_processed_once(
+    engine: Engine, sink: ListSink, scans: list[Any]
+) -> None:
+    run_batches(engine, [batch_payload(s) for s in scans[:6]])
+    hits = {t["id"]: t["hits"] for t in engine.tracks("all")["tracks"]}
+    again = engine.submit(batch_payload(scans[5]), "radar-1", "zenoh").result(timeout=10)
+    assert again.error is not None and again.error["error"] == "duplicate_batch"
+    assert again.error["time"] == scans[5].time
+    assert "accepted before" in again.error["detail"]
+    assert {t["id"]: t["hits"] for t in engine.tracks("all")["tracks"]} == hits
+    assert engine.seq == 6
+    # the same detections at the same time, written otherwise, are another batch
+    other = orjson.dumps(scans[5].to_batch(), option=orjson.OPT_INDENT_2)
+    assert engine.submit(other, "radar-1", "rest").result(timeout=10).accepted
+    # an older copy is out of sequence, as it was
+    old = engine.submit(batch_payload(scans[2]), "radar-1", "zenoh").result(timeout=10)
+    assert old.error is not None and old.error["error"] == "out_of_sequence"
+    _counters_agree(engine)
+
+
+def test_a_copy_of_a_held_batch_is_a_duplicate(sink: ListSink, scans: list[Any]) -> None:
+    eng = Engine(sink=sink, ingest=IngestConfig(reorder_window=0.5))
+    eng.start()
+    try:
+        first = eng.submit(batch_payload(scans[0]), "radar-1", "t")
+        copy = eng.submit(batch_payload(scans[0]), None, "t").result(timeout=10)
+        assert copy.error is not None and copy.error["error"] == "duplicate_batch"
+        assert first.result(timeout=10).accepted and eng.seq == 1
+    finally:
+        eng.stop()
+
+
+def test_recent_batches_are_bounded() -> None:
+    recent = RecentBatches(per_sensor=3, sensors=2)
+    digests = [batch_digest(bytes([i])) for i in range(5)]
+    for d in digests:
+        recent.add("a", d)
+    assert [recent.seen("a", d) for d in digests] == [False, False, True, True, True]
+    recent.add("b", digests[0])
+    recent.add("a", digests[0])  # "a" seen last: "b" is the one forgotten next
+    recent.add("c", digests[1])
+    assert not recent.seen("b", digests[0]) and recent.seen("a", digests[0])
+    assert recent.seen("c", digests[1]) and len(recent) == 4
+    recent.discard("c", digests[1])
+    assert not recent.seen("c", digests[1])
+    recent.discard("nobody", digests[1])
+    assert batch_digest(b"x") == batch_digest(b"x") != batch_digest(b"x ")
+
+
+def test_a_payload_over_max_batch_bytes_is_refused_unread(sink: ListSink, scans: list[Any]) -> None:
+    eng = Engine(sink=sink, max_batch_bytes=4096)
+    eng.start()
+    try:
+        small = batch_payload(scans[0], detections=scans[0].to_batch()["detections"][:5])
+        big = batch_payload(scans[1])
+        assert len(small) <= 4096 < len(big)
+        assert eng.submit(small, "radar-1", "t").result(timeout=10).accepted
+        r = eng.submit(big, "radar-1", "t").result(timeout=10)
+        assert r.error == {
+            "sensor_id": "radar-1",
+            "time": None,  # not read
+            "error": "batch_too_large",
+            "detail": f"payload: {len(big)} bytes, more than max_batch_bytes = 4096",
+            "received_bytes": len(big),
+        }
+        with pytest.raises(BatchError) as info:
+            eng.check(big)
+        assert info.value.reason == "batch_too_large"
+        report = eng.refuse_unread(10**9, None, "invalid_key", "key 'x': names no sensor")
+        assert (report["sensor_id"], report["received_bytes"]) == ("unknown", 10**9)
+        assert sink.errors[-1] == ("unknown", report)
+        _counters_agree(eng)
+    finally:
+        eng.stop()
+
+
+class _GatedPipeline(TrackingPipeline):
+    """The real pipeline, holding each scan until the test lets it go."""
+
+    gate = threading.Event()
+
+    def process(self, scan: Scan) -> StepResult:
+        assert self.gate.wait(30)
+        return super().process(scan)
+
+
+def test_the_queue_holds_a_bounded_number_of_bytes(sink: ListSink, scans: list[Any]) -> None:
+    """Batches wait in the queue up to ``queue_bytes`` of payloads; past that a sender
+    waits as for a full queue, and after ``put_timeout`` the batch is dropped."""
+    payloads = [batch_payload(s) for s in scans[:4]]
+    size = max(len(p) for p in payloads)
+    gate = threading.Event()
+    pipeline = type("Gated", (_GatedPipeline,), {"gate": gate})
+    eng = Engine(sink=sink, queue_bytes=2 * size, put_timeout=0.3, pipeline_factory=pipeline)
+    eng.start()
+    try:
+        first = eng.submit(payloads[0], "radar-1", "t")  # taken by the worker, held at the gate
+        deadline = time.monotonic() + 10
+        while eng.stats.snapshot()["queue_depth"] and time.monotonic() < deadline:
+            time.sleep(0.01)
+        queued = [eng.submit(p, "radar-1", "t") for p in payloads[1:3]]  # 2 x size: full
+        t0 = time.monotonic()
+        late = eng.submit(payloads[3], "radar-1", "t").result(timeout=10)
+        assert time.monotonic() - t0 >= 0.25
+        assert late.error is not None and late.error["error"] == "overloaded"
+        assert f"ingest queue's {2 * size} bytes stayed full" in late.error["detail"]
+        gate.set()
+        assert first.result(timeout=10).accepted
+        assert all(f.result(timeout=10).accepted for f in queued)
+        # the budget is given back: the dropped batch goes in now
+        assert eng.submit(payloads[3], "radar-1", "t").result(timeout=10).accepted
+        _counters_agree(eng)
+    finally:
+        gate.set()
         eng.stop()

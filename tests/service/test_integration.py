@@ -434,3 +434,154 @@ def test_service_as_a_client_of_a_router(service_factory: Any) -> None:
             sensor.close()
     finally:
         router.close()
+
+
+def _counters_agree(stats: dict[str, Any]) -> None:
+    assert stats["batches_received"] == (
+        stats["batches_processed"] + stats["batches_rejected"] + stats["batches_dropped"]
+    ), stats
+
+
+def test_hostile_input_over_zenoh(service_factory: Any) -> None:
+    """A key with an extra chunk, a time of 400 digits, the same batch twice, a payload over
+    max_batch_bytes, one over the transport's largest message: one Error report each where
+    one can be made, no track changed, and the counters agree."""
+    from tests.conftest import open_peer
+
+    svc = service_factory(max_batch_bytes=65536, zenoh_max_message_bytes=131072)
+    peer = open_peer(svc.endpoint)
+    errors = Collector(peer, "tracking/errors/**")
+    reports = Collector(peer, "tracking/tracks")
+    try:
+        _publish(peer, SCANS[:4])
+        reports.wait_for(4)
+        good = SCANS[4].to_batch()
+        with httpx.Client(base_url=svc.url, timeout=10) as http:
+            before = http.get("/api/v1/tracks", params={"status": "all"}).content
+            huge = b"1" + b"0" * 399
+            cases: list[tuple[str, bytes, str, str]] = [
+                ("tracking/detections/x/radar-1", orjson.dumps(good), "unknown", "invalid_key"),
+                ("tracking/detections/radar@1", orjson.dumps(good), "unknown", "invalid_key"),
+                (
+                    "tracking/detections/radar-1",
+                    orjson.dumps(good).replace(b'"time":4.0', b'"time":' + huge, 1),
+                    "radar-1",
+                    "invalid_batch",
+                ),
+                (
+                    "tracking/detections/radar-1",
+                    orjson.dumps(SCANS[3].to_batch()),  # processed already
+                    "radar-1",
+                    "duplicate_batch",
+                ),
+                (
+                    "tracking/detections/radar-1",
+                    orjson.dumps({**good, "detections": good["detections"] * 15}),
+                    "radar-1",
+                    "batch_too_large",
+                ),
+            ]
+            assert 65536 < len(cases[-1][1]) <= 131072
+            for i, (key, payload, sensor, reason) in enumerate(cases, start=1):
+                pub = declare_publisher(peer, key)
+                pub.put(payload)
+                got = errors.wait_for(i)
+                assert got[-1][0] == f"tracking/errors/{sensor}"
+                report = orjson.loads(got[-1][1])
+                assert (report["error"], report["sensor_id"]) == (reason, sensor), report
+                assert report["received_bytes"] == len(payload)
+                pub.undeclare()
+            assert "tracking/detections/{sensor_id}" in orjson.loads(errors.items[0][1])["detail"]
+            assert orjson.loads(errors.items[2][1])["detail"] == "time: not a finite number"
+            assert orjson.loads(errors.items[4][1])["time"] is None  # not read
+            # over the transport's largest message: Zenoh drops it as it arrives, unreported
+            pub = declare_publisher(peer, "tracking/detections/radar-1")
+            dropped = orjson.dumps({**good, "detections": good["detections"] * 60})
+            assert len(dropped) > 131072
+            pub.put(dropped)
+            pub.undeclare()
+            assert http.get("/api/v1/tracks", params={"status": "all"}).content == before
+            _publish(peer, SCANS[4:5])
+            assert orjson.loads(reports.wait_for(5)[-1][1])["seq"] == 5
+            assert len(reports.items) == 5 and len(errors.items) == len(cases)
+            stats = http.get("/api/v1/stats").json()
+            assert stats["batches_received"] == 5 + len(cases)
+            assert stats["rejected_by_reason"] == {
+                "invalid_key": 2,
+                "invalid_batch": 1,
+                "duplicate_batch": 1,
+                "batch_too_large": 1,
+            }
+            _counters_agree(stats)
+    finally:
+        errors.close()
+        reports.close()
+        peer.close()
+
+
+def test_hostile_input_over_rest(service_factory: Any) -> None:
+    svc = service_factory(max_batch_bytes=65536)
+    with httpx.Client(base_url=svc.url, timeout=10) as http:
+        for scan in SCANS[:3]:
+            assert http.post("/api/v1/detections", content=orjson.dumps(scan.to_batch())).is_success
+        good = orjson.dumps(SCANS[3].to_batch())
+        huge = b'"time":1' + b"0" * 399
+        cases = [
+            (good.replace(b'"time":3.0', huge, 1), "invalid_batch", "time: not a finite number"),
+            (
+                good.replace(b'"pd":', b'"pd":0.5,"pd":', 1),
+                "invalid_batch",
+                "duplicate key 'pd' in one object (a JSON parser keeps only the last)",
+            ),
+            (orjson.dumps(SCANS[1].to_batch()), "out_of_sequence", "older"),
+            (
+                b"[" + good * 20 + b"]",
+                "batch_too_large",
+                f"payload: {len(good) * 20 + 2} bytes, more than max_batch_bytes = 65536",
+            ),
+        ]
+        for payload, reason, detail in cases:
+            r = http.post("/api/v1/detections", content=payload)
+            assert r.status_code == 422, r.text
+            assert (r.json()["error"], r.json()["received_bytes"]) == (reason, len(payload))
+            assert detail in r.json()["detail"]
+        assert http.post("/api/v1/detections", content=good).status_code == 202
+        r = http.post("/api/v1/detections", content=good)
+        assert r.status_code == 422 and r.json()["error"] == "duplicate_batch"
+        stats = http.get("/api/v1/stats").json()
+        assert stats["batches_processed"] == 4 and stats["batches_rejected"] == len(cases) + 1
+        _counters_agree(stats)
+
+
+def test_health_answers_while_a_large_batch_is_validated(service: RunningService) -> None:
+    """The batch is read and validated off the event loop (it took /health 5.7 s to answer
+    behind an 18 MB batch checked inside the handler)."""
+    import threading
+    import time
+
+    dets = [
+        {"x": float(i), "y": -float(i), "cov": [[25.5, 0.5], [0.5, 25.5]], "id": f"d-{i:06d}"}
+        for i in range(10_000)
+    ]
+    dets[-1]["cov"] = [[1.0, 2.0], [2.0, 1.0]]  # found last: the whole batch is validated
+    payload = orjson.dumps({"sensor_id": "big-1", "time": 1.0, "detections": dets})
+    latencies: list[float] = []
+    answers: list[httpx.Response] = []
+
+    def post() -> None:
+        with httpx.Client(base_url=service.url, timeout=30) as http:
+            for _ in range(3):
+                answers.append(http.post("/api/v1/detections", content=payload))
+
+    with httpx.Client(base_url=service.url, timeout=10) as http:
+        sender = threading.Thread(target=post)
+        sender.start()
+        while sender.is_alive():
+            t0 = time.perf_counter()
+            assert http.get("/health").status_code == 200
+            latencies.append(time.perf_counter() - t0)
+            time.sleep(0.005)
+        sender.join()
+    assert [r.status_code for r in answers] == [422] * 3
+    assert answers[0].json()["detail"] == "detections[9999].cov: not symmetric positive definite"
+    assert len(latencies) >= 3 and max(latencies) < 1.0, max(latencies)

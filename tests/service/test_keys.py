@@ -64,3 +64,31 @@ def test_the_key_layout_of_the_contract() -> None:
 )
 def test_local_endpoints(listen: list[str], expected: list[str]) -> None:
     assert local_endpoints(listen) == expected
+
+
+@pytest.mark.parametrize(
+    ("key", "sensor"),
+    [
+        ("tracking/detections/radar-1", "radar-1"),
+        ("tracking/detections/A.b_c-9", "A.b_c-9"),
+        ("tracking/detections/" + "s" * 64, "s" * 64),
+        ("tracking/detections/x/radar1", None),  # an extra chunk is not the sensor's key
+        ("tracking/detections/radar1/x", None),
+        ("tracking/detections/", None),
+        ("tracking/detections/" + "s" * 65, None),
+        ("tracking/detections/radar@1", None),
+        ("other/detections/radar1", None),
+        ("tracking/detectionsX/radar1", None),
+        ("x/tracking/detections/radar1", None),
+    ],
+)
+def test_a_sensors_key_is_exactly_prefix_detections_sensor(key: str, sensor: str | None) -> None:
+    assert Keys().sensor_of(key) == sensor
+    site = Keys("site/a")
+    assert site.sensor_of(key.replace("tracking/", "site/a/", 1)) == sensor
+
+
+def test_the_largest_message_the_transport_takes() -> None:
+    assert _get(make_config("peer", [], []), "transport/link/rx/max_message_size") == 1 << 30
+    conf = make_config("peer", [], [], max_message_size=64 << 20)
+    assert _get(conf, "transport/link/rx/max_message_size") == 64 << 20

@@ -11,12 +11,16 @@ import pytest
 
 from service.convert import batch_to_scan, report_dict, track_to_dict
 from service.schemas import (
+    MAX_ABS_AMPLITUDE,
+    MAX_ABS_RANGE_RATE,
+    MAX_ID_LENGTH,
     BatchError,
     DetectionBatchIn,
     TrackOut,
     TrackReportOut,
     decode_batch,
 )
+from trackers.pipeline import MAX_ABS_POSITION, MAX_ABS_TIME, MAX_VARIANCE
 from trackers.types import Extent, StepResult, TrackSnapshot
 
 CONTRACT_EXAMPLE: dict[str, Any] = {
@@ -51,8 +55,8 @@ def _det(i: int, **changes: Any) -> dict[str, Any]:
 def test_contract_example_passes() -> None:
     batch = decode_batch(orjson.dumps(CONTRACT_EXAMPLE))
     assert batch.sensor_id == "radar-1"
-    assert batch.detections[0].vr == 3.1
-    assert batch.detections[0].id == "d17"
+    assert batch.detections[0]["vr"] == 3.1
+    assert batch.detections[0]["id"] == "d17"
     assert batch.pd == 0.9
 
 
@@ -293,3 +297,113 @@ def test_report_dict_matches_the_contract() -> None:
 def test_batch_model_rejects_extra_fields_in_python_mode_too() -> None:
     with pytest.raises(ValueError):
         DetectionBatchIn.model_validate({**_batch(), "extra": 1})
+
+
+HUGE = b"1" + b"0" * 399  # a 400-digit integer
+
+BOUNDED: list[tuple[bytes, str]] = [
+    # every number of a batch is bounded where it enters
+    (orjson.dumps(_batch(time=1.7e18)), "time: must be <= 1e+12"),
+    (orjson.dumps(_batch(time=-2e12)), "time: must be >= -1e+12"),
+    (orjson.dumps(_det(2, x=1.5e9)), "detections[2].x: must be <= 1e+09"),
+    (orjson.dumps(_det(0, y=-1e10)), "detections[0].y: must be >= -1e+09"),
+    (
+        orjson.dumps(_det(1, cov=[[1e15, 0], [0, 1e15]])),
+        "detections[1].cov[0][0]: must be <= 1e+14",
+    ),
+    (orjson.dumps(_batch(cov=[[4, -2e14], [-2e14, 4]])), "cov[0][1]: must be >= -1e+14"),
+    (
+        orjson.dumps({**_det(0, vr=4e8), "sensor_position": [0, 0]}),
+        "detections[0].vr: must be <= 3e+08",
+    ),
+    (orjson.dumps(_det(3, amplitude=-1e13)), "detections[3].amplitude: must be >= -1e+12"),
+    (orjson.dumps(_det(4, id="d" * 257)), "detections[4].id: longer than 256 characters"),
+    (orjson.dumps(_batch(sensor_position=[0, 2e9])), "sensor_position[1]: must be <= 1e+09"),
+    (orjson.dumps(_batch(clutter_density=1.5)), "clutter_density: must be <= 1.0"),
+    # integers of any length parse, and are no finite numbers
+    (b'{"sensor_id": "r", "time": ' + HUGE + b', "detections": []}', "time: not a finite number"),
+    (
+        b'{"sensor_id": "r", "time": 1, "detections": [{"x": -' + HUGE + b', "y": 0}]}',
+        "detections[0].x: not a finite number",
+    ),
+    (b'{"sensor_id": "r", "time": 1, "detections": [], "pd": ' + HUGE + b"}", "pd: not a finite"),
+]
+
+
+@pytest.mark.parametrize(("payload", "detail"), BOUNDED)
+def test_every_number_is_bounded_where_it_enters(payload: bytes, detail: str) -> None:
+    with pytest.raises(BatchError) as info:
+        decode_batch(payload)
+    assert info.value.reason == "invalid_batch"
+    assert info.value.detail.startswith(detail), info.value.detail
+
+
+def test_the_largest_numbers_allowed_pass() -> None:
+    det = {
+        "x": MAX_ABS_POSITION,
+        "y": -MAX_ABS_POSITION,
+        "cov": [[MAX_VARIANCE, 0], [0, MAX_VARIANCE]],
+        "vr": -MAX_ABS_RANGE_RATE,
+        "amplitude": MAX_ABS_AMPLITUDE,
+        "id": "d" * MAX_ID_LENGTH,
+    }
+    batch = decode_batch(
+        orjson.dumps(
+            _batch(time=-MAX_ABS_TIME, detections=[det], sensor_position=[0, MAX_ABS_POSITION])
+        )
+    )
+    assert batch.time == -MAX_ABS_TIME and batch.detections[0]["x"] == MAX_ABS_POSITION
+
+
+def test_the_bounds_are_in_the_schema_and_match_the_tracker() -> None:
+    """OpenAPI shows every bound; positions and covariances have the tracker's own
+    (:func:`trackers.pipeline.check_scan`)."""
+    schema = DetectionBatchIn.model_json_schema()
+    props = schema["properties"]
+    det = schema["$defs"]["DetectionIn"]["properties"]
+
+    def number(node: dict[str, Any]) -> dict[str, Any]:
+        return next(s for s in node.get("anyOf", [node]) if s.get("type") == "number")
+
+    assert (number(props["time"])["minimum"], number(props["time"])["maximum"]) == (
+        -MAX_ABS_TIME,
+        MAX_ABS_TIME,
+    )
+    for name in ("x", "y"):
+        assert number(det[name])["maximum"] == MAX_ABS_POSITION
+        assert number(det[name])["minimum"] == -MAX_ABS_POSITION
+    assert number(det["vr"])["maximum"] == MAX_ABS_RANGE_RATE
+    assert number(det["amplitude"])["minimum"] == -MAX_ABS_AMPLITUDE
+    string = next(s for s in det["id"]["anyOf"] if s.get("type") == "string")
+    assert string["maxLength"] == MAX_ID_LENGTH
+    cov = next(s for s in det["cov"]["anyOf"] if s.get("type") == "array")
+    entry = cov["prefixItems"][0]["prefixItems"][1]
+    assert (entry["minimum"], entry["maximum"]) == (-MAX_VARIANCE, MAX_VARIANCE)
+    position = next(s for s in props["sensor_position"]["anyOf"] if s.get("type") == "array")
+    assert position["prefixItems"][0]["maximum"] == MAX_ABS_POSITION
+    pd = number(props["pd"])
+    assert (pd["exclusiveMinimum"], pd["maximum"]) == (0.0, 1.0)
+    clutter = number(props["clutter_density"])
+    assert (clutter["exclusiveMinimum"], clutter["maximum"]) == (0.0, 1.0)
+    # unknown fields are refused, and the schema says so
+    assert schema["additionalProperties"] is False
+    assert schema["$defs"]["DetectionIn"]["additionalProperties"] is False
+
+
+def test_validation_stops_at_the_first_bad_detection() -> None:
+    """Ten thousand bad detections cost the errors of one."""
+    dets = [{"x": "a", "y": None, "cov": 1, "vr": [], "amplitude": {}, "id": 5}] * 10_000
+    with pytest.raises(BatchError) as info:
+        decode_batch(orjson.dumps(_batch(detections=dets)))
+    assert info.value.detail.startswith("detections[0].x: not a number; detections[0].y: ")
+    assert "detections[1]" not in info.value.detail
+
+
+def test_unknown_fields_are_named_after_the_rest_is_valid() -> None:
+    payload = orjson.dumps({**_det(2, colour="red", z=1), "vr_unit": "m/s"})
+    with pytest.raises(BatchError) as info:
+        decode_batch(payload)
+    assert info.value.detail == "vr_unit: unknown field"
+    with pytest.raises(BatchError) as info:
+        decode_batch(orjson.dumps(_det(2, colour="red", z=1)))
+    assert info.value.detail == "detections[2].colour: unknown field"

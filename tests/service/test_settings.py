@@ -82,6 +82,15 @@ def test_endpoint_lists(monkeypatch: pytest.MonkeyPatch) -> None:
         (["--tracks-congestion-control", "sometimes"], "tracks_congestion_control"),
         (["--instance-id", "a/b"], "instance_id"),
         (["--log-level", "loud"], "log_level"),
+        (["--max-batch-bytes", "100"], "max_batch_bytes"),
+        (
+            ["--max-batch-bytes", str(64 << 20)],
+            "TRACKER_MAX_BATCH_BYTES: must not be more than ingest_queue_bytes",
+        ),
+        (
+            ["--max-batch-bytes", "5000000", "--zenoh-max-message-bytes", "4000000"],
+            "TRACKER_MAX_BATCH_BYTES: must not be more than zenoh_max_message_bytes",
+        ),
     ],
 )
 def test_bad_values_name_the_setting(argv: list[str], fragment: str) -> None:
@@ -136,3 +145,13 @@ def test_settings_model_is_the_one_place() -> None:
         "log_level",
         "demo",
     } <= names
+
+
+def test_the_cost_bounds(monkeypatch: pytest.MonkeyPatch) -> None:
+    s = load_settings([])
+    assert s.max_batch_bytes == 4 << 20
+    assert s.ingest_queue_bytes == 32 << 20
+    assert s.zenoh_max_message_bytes == 64 << 20
+    monkeypatch.setenv("TRACKER_MAX_BATCH_BYTES", "65536")
+    s = load_settings(["--ingest-queue-bytes", "65536"])
+    assert (s.max_batch_bytes, s.ingest_queue_bytes) == (65536, 65536)

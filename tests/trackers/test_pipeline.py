@@ -75,6 +75,7 @@ def state(p):
     ("scan", "reason", "text"),
     [
         (scan_at(float("nan"), [0, 0]), "invalid_scan", "time"),
+        (scan_at(1.7e18, [0, 0]), "invalid_scan", "time: beyond ±1e+12 s"),
         (scan_at(5.0, [[0, 0], [np.nan, 1]]), "invalid_scan", "detections[1]"),
         (
             scan_at(5.0, [0, 0], R=np.array([[[1.0, 2.0], [2.0, 1.0]]])),
