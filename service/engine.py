@@ -34,6 +34,7 @@ from service.ingest import (
     RecentBatches,
     Refusals,
     ReorderBuffer,
+    SensorClocks,
     batch_digest,
     check_batch,
     time_jump_detail,
@@ -100,6 +101,7 @@ class Engine:
         self._queued_bytes = 0  # payload bytes in the queue
         self._bytes_free = threading.Condition()
         self._recent = RecentBatches()
+        self._clocks = SensorClocks()  # each sensor's usual interval, for the time-jump guard
         self._stop_drain_seconds = stop_drain_seconds
         self._state = ReportState.empty()
         self._seq = 0
@@ -428,7 +430,10 @@ class Engine:
                 return
         if last is not None:
             waited = time.monotonic() - self._last_wall
-            jump = time_jump_detail(batch.time, last, ingest.max_time_jump, waited)
+            revisit = self._clocks.revisit(batch.sensor_id)
+            jump = time_jump_detail(
+                batch.time, last, ingest.max_time_jump, waited, revisit, ingest.reorder_window
+            )
             if jump is not None:
                 self._refusals.reject(item, "time_jump", jump, batch)
                 return
@@ -463,6 +468,7 @@ class Engine:
             return
         self._seq += 1
         self._last_wall = time.monotonic()
+        self._clocks.accepted(batch.sensor_id, scan.time)
         seq = self._seq
         confirmed = [track_to_dict(t) for t in result.confirmed()]
         state = ReportState.of(report_dict(seq, result, ms, confirmed), result)

@@ -21,10 +21,11 @@ import math
 import re
 import threading
 import time
-from collections import OrderedDict
+from collections import OrderedDict, deque
 from collections.abc import Iterator
 from concurrent.futures import Future
 from dataclasses import dataclass, field
+from itertools import pairwise
 from typing import Any
 
 import orjson
@@ -47,11 +48,13 @@ from service.schemas import (
 from service.stats import Stats
 
 __all__ = [
+    "REVISIT_FACTOR",
     "IngestResult",
     "Item",
     "RecentBatches",
     "Refusals",
     "ReorderBuffer",
+    "SensorClocks",
     "batch_digest",
     "check_batch",
     "peek",
@@ -123,18 +126,69 @@ def check_batch(
     return batch
 
 
-def time_jump_detail(batch_time: float, last: float, max_jump: float, waited: float) -> str | None:
+def time_jump_detail(
+    batch_time: float,
+    last: float,
+    max_jump: float,
+    waited: float,
+    revisit: float = 0.0,
+    window: float = 0.0,
+) -> str | None:
     """Why a batch at ``batch_time`` is too far ahead of the last processed time ``last``, or
-    ``None`` when it is not. It may run ahead by the ``waited`` seconds of wall time since
-    ``last`` was processed plus ``max_jump``; further ahead, it would put every later batch
-    out of sequence."""
-    if batch_time - last <= max_jump + waited:
+    ``None`` when it is not.
+
+    It may run ahead by the ``waited`` seconds of wall time since ``last`` was processed plus
+    its allowance ``max(max_jump, REVISIT_FACTOR · revisit)``, ``revisit`` being its sensor's
+    usual interval between batches (:class:`SensorClocks`): a sensor that reports every 10 s,
+    replayed faster than real time, moves the time on by 10 s a batch; and by the reorder
+    ``window``, since batches that recent may still be held back. Further ahead, its
+    clock is wrong: taking the batch would coast every track of every sensor to that time
+    (deleting them) and put every later batch out of sequence."""
+    allowed = max(max_jump, REVISIT_FACTOR * revisit)
+    if batch_time - last <= allowed + waited + window:
         return None
+    why = f"ingest.max_time_jump = {max_jump} s"
+    if allowed > max_jump:
+        why = f"{REVISIT_FACTOR:g} times the sensor's usual {revisit:.3g} s between batches"
+    if window:
+        why += f" plus the {window:g} s reorder window"
     return (
         f"time {batch_time} is {batch_time - last:.6g} s after the last processed time {last}: "
-        f"more than ingest.max_time_jump = {max_jump} s plus the {waited:.3g} s of wall time "
-        "since"
+        f"more than {why} plus the {waited:.3g} s of wall time since"
     )
+
+
+#: A batch may run ahead of the service's time by this many times its sensor's usual interval.
+REVISIT_FACTOR = 2.0
+
+
+class SensorClocks:
+    """Each sensor's usual interval between batches: the median of the gaps between the times
+    of its last ``gaps + 1`` accepted batches, for the last ``sensors`` sensors seen (least
+    recently seen forgotten first). Used by one thread (the worker)."""
+
+    def __init__(self, gaps: int = 8, sensors: int = 1024) -> None:
+        self.gaps = gaps
+        self.sensors = sensors
+        self._times: OrderedDict[str, deque[float]] = OrderedDict()
+
+    def accepted(self, sensor_id: str, time: float) -> None:
+        times = self._times.get(sensor_id)
+        if times is None:
+            times = self._times[sensor_id] = deque(maxlen=self.gaps + 1)
+            if len(self._times) > self.sensors:
+                self._times.popitem(last=False)
+        else:
+            self._times.move_to_end(sensor_id)
+        times.append(time)
+
+    def revisit(self, sensor_id: str) -> float:
+        """The sensor's usual interval between batches (s), 0 before its second batch."""
+        times = self._times.get(sensor_id)
+        if times is None or len(times) < 2:
+            return 0.0
+        gaps = sorted(b - a for a, b in pairwise(times) if b > a)
+        return gaps[len(gaps) // 2] if gaps else 0.0
 
 
 class ReorderBuffer:

@@ -413,11 +413,13 @@ class IngestConfig(BaseModel):
     reorder_window: Annotated[Finite, Field(ge=0.0, le=MAX_REORDER_WINDOW)] = Field(
         default=0.0, description="seconds a batch may be held back to put late ones in time order"
     )
-    max_time_jump: Annotated[Finite, Field(gt=0.0)] = Field(
-        default=3600.0,
+    max_time_jump: Annotated[Finite, Field(gt=0.0, le=MAX_REORDER_WINDOW)] = Field(
+        default=10.0,
         description=(
             "seconds a batch's time may run ahead of the last processed time, beyond the wall "
-            "time that has passed since: a clock far in the future (a unit error, say) would "
-            "otherwise put every later batch out of sequence"
+            "time that has passed since (a sensor may also run ahead by twice its usual "
+            "interval between batches, and by the reorder window): a sensor whose clock runs "
+            "ahead would otherwise coast every sensor's tracks to its time, deleting them, "
+            "and put every later batch out of sequence"
         ),
     )
