@@ -1,7 +1,7 @@
 """The service under load: detection batches over Zenoh from another process, REST reads
 alongside.
 
-    python -m benchmarks.service_load [--rate 200] [--seconds 15] [--rounds 1]
+    python -m benchmarks.service_load [--rate 200] [--seconds 15] [--rounds 1] [--no-viewer]
 
 Starts ``tracker-service`` as a subprocess on free loopback ports, then runs the scenario
 publisher (``clients.publish``, reliable, ``CongestionControl.BLOCK``) as a second process:
@@ -12,7 +12,10 @@ detections). During each phase this process reads ``GET /api/v1/tracks`` about 1
 second and records the latency. Printed per phase: batches published, processed, rejected
 and dropped (from ``/api/v1/stats``), the processing rate, the tracker's time per batch and
 the REST latency percentiles, against the targets (≥ 200 batches/s, nothing lost, p99 < 20 ms);
-then the service's resident memory after each phase. Exits 1 when a target is missed.
+then the service's resident memory after each phase. Then the paced and max-rate phases again
+with a live viewer connected (a thread reading ``GET /api/v1/stream`` as a browser would),
+printing the frames it got and those dropped for it (unless ``--no-viewer``). Exits 1 when a
+target is missed.
 """
 
 from __future__ import annotations
@@ -55,6 +58,8 @@ class Phase:
     tracker_p50: float
     tracker_p99: float
     get_ms: np.ndarray
+    frames: int | None = None  # live view frames read, when a viewer was connected
+    frames_dropped: int | None = None
 
 
 def sample_latency(client: httpx.Client, stop: threading.Event, out: list[float]) -> None:
@@ -67,9 +72,42 @@ def sample_latency(client: httpx.Client, stop: threading.Event, out: list[float]
         stop.wait(0.01)
 
 
+def read_stream(base_url: str, stop: threading.Event, frames: list[int]) -> None:
+    """A live viewer: read ``GET /api/v1/stream`` until ``stop`` is set, counting report
+    events (a keep-alive comment comes every 10 s when no report does)."""
+    with (
+        httpx.Client(base_url=base_url, timeout=httpx.Timeout(5.0, read=30.0)) as http,
+        http.stream("GET", "/api/v1/stream") as r,
+    ):
+        for line in r.iter_lines():
+            if line.startswith("event: report"):
+                frames[0] += 1
+            if stop.is_set():
+                return
+
+
 def run_phase(
-    name: str, client: httpx.Client, endpoint: str, scans: int, rate: float | None, offset: float
+    name: str,
+    client: httpx.Client,
+    endpoint: str,
+    scans: int,
+    rate: float | None,
+    offset: float,
+    viewer: bool = False,
 ) -> Phase:
+    frames = [0]
+    stop_viewer = threading.Event()
+    reader = None
+    if viewer:
+        reader = threading.Thread(
+            target=read_stream, args=(str(client.base_url), stop_viewer, frames), daemon=True
+        )
+        reader.start()
+        deadline = time.monotonic() + 5
+        while client.get("/api/v1/stats").json()["viewers"] < 1:
+            if time.monotonic() > deadline:
+                raise RuntimeError("the viewer did not connect")
+            time.sleep(0.05)
     s0 = client.get("/api/v1/stats").json()
     cmd = [
         sys.executable,
@@ -102,6 +140,11 @@ def run_phase(
     s1 = client.get("/api/v1/stats").json()
     processed = s1["batches_processed"] - s0["batches_processed"]
     sampler.join(1.0)
+    if reader is not None:
+        stop_viewer.set()
+        reader.join(15.0)
+        if reader.is_alive():
+            raise RuntimeError("the viewer did not stop")
     return Phase(
         name=name,
         target_rate=rate,
@@ -113,6 +156,8 @@ def run_phase(
         tracker_p50=s1["processing_ms"]["p50"],
         tracker_p99=s1["processing_ms"]["p99"],
         get_ms=np.asarray(latencies),
+        frames=frames[0] if viewer else None,
+        frames_dropped=(s1["view_frames_dropped"] - s0["view_frames_dropped"] if viewer else None),
     )
 
 
@@ -161,6 +206,9 @@ def main(argv: list[str] | None = None) -> int:
         type=int,
         default=1,
         help="max-rate phases one after another (a soak: watch the service's memory)",
+    )
+    parser.add_argument(
+        "--no-viewer", action="store_true", help="skip the phases with a live viewer connected"
     )
     args = parser.parse_args(argv)
     if args.rounds < 1:
@@ -212,6 +260,17 @@ def main(argv: list[str] | None = None) -> int:
                 offset = k * (float(scans) + 10.0)
                 phases.append(run_phase(name, client, endpoint, scans, None, offset))
                 rss.append((name, rss_mb(service.pid)))
+            if not args.no_viewer:  # the same two phases with a browser's stream open
+                offset = (args.rounds + 1) * (float(scans) + 10.0)
+                name = "paced+viewer"
+                phases.append(
+                    run_phase(name, client, endpoint, scans, args.rate, offset, viewer=True)
+                )
+                rss.append((name, rss_mb(service.pid)))
+                offset += float(scans) + 10.0
+                name = "max+viewer"
+                phases.append(run_phase(name, client, endpoint, scans, None, offset, viewer=True))
+                rss.append((name, rss_mb(service.pid)))
     finally:
         service.send_signal(signal.SIGTERM)
         try:
@@ -237,11 +296,20 @@ def main(argv: list[str] | None = None) -> int:
             f"{p.rate:>10.1f}{p.tracker_p50:>11.2f}/{p.tracker_p99:<8.2f}"
             f"{np.percentile(g, 50):>9.2f}/{np.percentile(g, 99):.2f}/{g.max():.1f}"
         )
+    for p in phases:
+        if p.frames is not None:
+            print(
+                f"   {p.name}: the viewer read {p.frames} frames; {p.frames_dropped} dropped "
+                "for it (replaced by newer ones; at most 25 frames/s are sent)"
+            )
     print(
         "   service resident memory: "
         + ", ".join(f"{name} {mb:.0f} MB" for name, mb in rss if not math.isnan(mb))
     )
-    ok_rate = min(p.rate for p in phases[1:]) >= 200 and phases[0].rate >= 0.97 * args.rate
+    paced = [p for p in phases if p.target_rate]
+    ok_rate = min(p.rate for p in phases if not p.target_rate) >= 200 and all(
+        p.rate >= 0.97 * args.rate for p in paced
+    )
     lost = any(p.processed != p.published or p.dropped or p.rejected for p in phases)
     p99 = max(float(np.percentile(p.get_ms, 99)) for p in phases)
     print(

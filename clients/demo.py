@@ -5,9 +5,12 @@ Examples::
     python -m clients.demo                         # against a service on tcp/127.0.0.1:7447
     python -m clients.demo -e tcp/10.0.0.5:7447 --summary-interval 2
 
-Publishes the reference scenario's batches over Zenoh in real time, as a sensor would,
-looping with shifted times so it never goes out of sequence (each loop starts after the
-service's latest report). Every ``--summary-interval`` seconds it asks the service's
+Publishes a scenario's batches over Zenoh in real time, as a sensor would, its times
+starting after the service's latest report so they never go out of sequence: by default the
+continuous scenario (:mod:`clients.scenarios.continuous`: targets born at random times, each
+living a random while, so tracks end and start one by one as in life; one radar at 1 s,
+Pd 0.9, clutter), or with ``--scenario reference`` the 100 s reference scenario in a loop.
+Every ``--summary-interval`` seconds it asks the service's
 queryable ``{prefix}/state/tracks`` for the latest Track report and logs a one-line summary
 of the confirmed tracks. ``tracker-service --demo`` starts it as a child process connected to
 the service and stops it on shutdown. Runs until SIGINT or SIGTERM.
@@ -29,6 +32,7 @@ from typing import Any
 import orjson
 import zenoh
 
+from clients.scenarios.continuous import ContinuousScenario
 from clients.scenarios.multitarget import reference_scenario, simulate
 from clients.zenoh_session import (
     DEFAULT_ENDPOINT,
@@ -38,7 +42,7 @@ from clients.zenoh_session import (
 )
 from service.keys import Keys
 
-__all__ = ["Demo", "build_parser", "latest_report", "main", "summary_line"]
+__all__ = ["SCENARIOS", "Demo", "build_parser", "latest_report", "main", "summary_line"]
 
 log = logging.getLogger("clients.demo")
 
@@ -66,9 +70,14 @@ def latest_report(session: zenoh.Session, keys: Keys, timeout: float) -> dict[st
     return found
 
 
+#: ``continuous``: targets come and go forever (:mod:`clients.scenarios.continuous`);
+#: ``reference``: the 100 s reference scenario replayed in a loop.
+SCENARIOS = ("continuous", "reference")
+
+
 class Demo:
-    """Publishes the reference scenario in real time until ``stop`` is set (or, with
-    ``parent``, until the process ``parent`` is no longer this process's parent)."""
+    """Publishes a scenario in real time until ``stop`` is set (or, with ``parent``, until
+    the process ``parent`` is no longer this process's parent)."""
 
     def __init__(
         self,
@@ -82,7 +91,11 @@ class Demo:
         wait_matching: float = 5.0,
         query_timeout: float = 2.0,
         parent: int | None = None,
+        scenario: str = "continuous",
     ) -> None:
+        if scenario not in SCENARIOS:
+            raise ValueError(f"scenario: one of {', '.join(SCENARIOS)}, got {scenario!r}")
+        self.scenario = scenario
         self.session = session
         self.keys = keys
         self.publisher = BatchPublisher(session, keys.prefix, wait_matching=wait_matching)
@@ -98,6 +111,38 @@ class Demo:
         return self.publisher.published
 
     def run(self) -> None:
+        if self.scenario == "continuous":
+            self._run_continuous()
+        else:
+            self._run_reference()
+
+    def _run_continuous(self) -> None:
+        """The continuous scenario, forever, its times shifted to after the service's latest."""
+        scenario = ContinuousScenario(seed=self.seed)
+        report = latest_report(self.session, self.keys, self.query_timeout)
+        last = None if report is None else report.get("time")
+        offset = 0.0 if last is None else float(last) + scenario.dt
+        start_wall = time.monotonic()
+        next_summary = start_wall + self.summary_interval
+        for scan in scenario.scans():
+            due = start_wall + scan.time / self.speed
+            while True:
+                now = time.monotonic()
+                if now >= next_summary:
+                    self._log_summary()
+                    next_summary = time.monotonic() + self.summary_interval
+                    continue
+                if now >= due:
+                    break
+                if self._wait(min(due, next_summary) - now):
+                    return
+            if self._stopped():
+                return
+            batch = scan.to_batch()
+            batch["time"] = scan.time + offset
+            self.publisher.put(batch)
+
+    def _run_reference(self) -> None:
         scans = simulate(reference_scenario(self.seed))
         if not scans:
             return
@@ -155,11 +200,20 @@ def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="python -m clients.demo",
         description=(
-            "Publish the reference scenario to the tracking service in real time and log a "
+            "Publish a simulated scenario to the tracking service in real time and log a "
             "summary of its confirmed tracks every few seconds."
         ),
     )
     add_zenoh_arguments(parser)
+    parser.add_argument(
+        "--scenario",
+        choices=SCENARIOS,
+        default="continuous",
+        help=(
+            "continuous (default): targets born at random times, living a random while, "
+            "leaving or no longer seen; reference: the 100 s reference scenario in a loop"
+        ),
+    )
     parser.add_argument("--seed", type=int, default=0, help="scenario seed (default 0)")
     parser.add_argument(
         "--speed", type=float, default=1.0, help="times real time (default 1: real time)"
@@ -219,10 +273,13 @@ def main(argv: Sequence[str] | None = None) -> int:
         summary_interval=args.summary_interval,
         wait_matching=args.wait_matching,
         parent=parent,
+        scenario=args.scenario,
     )
     try:
         log.info(
-            "demo: publishing the reference scenario to %s", args.connect or [DEFAULT_ENDPOINT]
+            "demo: publishing the %s scenario to %s",
+            args.scenario,
+            args.connect or [DEFAULT_ENDPOINT],
         )
         demo.run()
     finally:

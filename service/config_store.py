@@ -10,7 +10,9 @@ accepted with :meth:`ConfigStore.take_pending` before its next batch.
 
 from __future__ import annotations
 
+import logging
 import threading
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -26,7 +28,63 @@ from service.files import atomic_write
 from service.schemas import IngestConfig
 from trackers.config import TrackerConfig
 
-__all__ = ["ConfigStore", "load_config_file", "merge_patch", "save_config_file"]
+__all__ = [
+    "ConfigApplied",
+    "ConfigStore",
+    "config_changes",
+    "load_config_file",
+    "merge_patch",
+    "save_config_file",
+]
+
+log = logging.getLogger("service.config")
+
+_MISSING = object()
+
+
+def _flatten(doc: Any, prefix: str, out: dict[str, Any]) -> None:
+    if isinstance(doc, dict) and doc:
+        for key, value in doc.items():
+            _flatten(value, f"{prefix}.{key}" if prefix else str(key), out)
+    else:
+        out[prefix] = doc
+
+
+def _shown(value: Any) -> str:
+    if value is _MISSING:
+        return "(none)"
+    return orjson.dumps(value).decode() if not isinstance(value, str) else value
+
+
+def config_changes(old: dict[str, Any], new: dict[str, Any]) -> list[str]:
+    """What differs between two configuration documents, one ``"section.field old -> new"``
+    per changed leaf (a list is one value), in the new document's order."""
+    before: dict[str, Any] = {}
+    after: dict[str, Any] = {}
+    _flatten(old, "", before)
+    _flatten(new, "", after)
+    out = []
+    for name in [*after, *(n for n in before if n not in after)]:
+        a, b = before.get(name, _MISSING), after.get(name, _MISSING)
+        if a != b:
+            out.append(f"{name} {_shown(a)} -> {_shown(b)}")
+    return out
+
+
+@dataclass(frozen=True)
+class ConfigApplied:
+    """What a PUT or PATCH did: the accepted document, what changed (``"motion.q_cv 0.5 ->
+    1.0"`` each) and the file it was saved to (``None``: no config file)."""
+
+    document: dict[str, Any]
+    changes: tuple[str, ...]
+    saved_to: Path | None
+
+    def summary(self) -> str:
+        """``"motion.q_cv 0.5 -> 1.0; saved to /path/config.json"``, as logged."""
+        changed = "; ".join(self.changes) if self.changes else "nothing changed"
+        saved = f"saved to {self.saved_to}" if self.saved_to is not None else "not saved"
+        return f"{changed}; {saved}"
 
 
 def merge_patch(base: Any, patch: Any) -> Any:
@@ -107,16 +165,24 @@ class ConfigStore:
         """Validate a whole document (missing fields take defaults), save it, and accept it.
         Raises :class:`ConfigError` (invalid) or ``OSError`` (not saved) and changes
         nothing."""
-        with self._lock:
-            return self._accept(doc)
+        return self.apply(doc).document
 
     def patch(self, patch: Any) -> dict[str, Any]:
         """Merge ``patch`` into the accepted document (JSON merge patch), then as
         :meth:`replace`."""
-        check_patch(patch)
+        return self.apply(patch, merge=True).document
+
+    def apply(self, doc: Any, *, merge: bool = False) -> ConfigApplied:
+        """:meth:`replace` (or :meth:`patch` with ``merge``), saying what changed and where
+        it was saved; logs ``configuration applied: ...``."""
+        if merge:
+            check_patch(doc)
         with self._lock:
             current = config_document(self._tracker, self._ingest)
-            return self._accept(merge_patch(current, patch))
+            new = self._accept(merge_patch(current, doc) if merge else doc)
+        applied = ConfigApplied(new, tuple(config_changes(current, new)), self.path)
+        log.info("configuration applied: %s", applied.summary())
+        return applied
 
     def take_pending(self) -> tuple[TrackerConfig, IngestConfig] | None:
         """What was accepted since the last call (the latest only), or ``None``."""

@@ -26,7 +26,7 @@ from concurrent.futures import Future
 from pathlib import Path
 from typing import Any
 
-from service.config_store import ConfigStore
+from service.config_store import ConfigApplied, ConfigStore
 from service.convert import batch_to_scan, report_dict, track_to_dict
 from service.ingest import (
     IngestResult,
@@ -44,6 +44,7 @@ from service.reports import ReportOut, ReportSink, ReportState
 from service.schemas import BatchError, DetectionBatchIn, IngestConfig
 from service.state_store import EngineCheckpoint, StateStore, restored_result
 from service.stats import Stats
+from service.viewers import ViewerHub
 from trackers.config import TrackerConfig
 from trackers.pipeline import TrackingPipeline
 from trackers.state import StateError
@@ -113,6 +114,9 @@ class Engine:
         self.stats.queue_depth = self._queue.qsize
         self.stats.held_for_reorder = self._held.__len__
         self.stats.tracks_tentative = lambda: self._state.tentative_count()
+        #: the live view's viewers: each report is handed to them, never waited for
+        self.view = ViewerHub(on_drop=self.stats.view_frame_dropped)
+        self.stats.viewers = self.view.__len__
         # the tracker state file (service.state_store): restored at start, saved off the worker
         self._state_store = state_store
         self._checkpoint: EngineCheckpoint | None = None
@@ -200,12 +204,14 @@ class Engine:
         source: str,
         *,
         batch: DetectionBatchIn | None = None,
+        on_held: Callable[[], None] | None = None,
     ) -> Future[IngestResult]:
         """Queue one raw batch (``key_sensor_id``: the Zenoh key's last chunk, ``None`` for
         REST; ``batch``: the already validated batch, if the caller checked it). Blocks while
         the queue is full, for up to ``put_timeout`` seconds; then the batch is dropped and
         reported as ``overloaded``. The future resolves to an
-        :class:`~service.ingest.IngestResult`."""
+        :class:`~service.ingest.IngestResult`. ``on_held`` is called (on the worker thread)
+        if the reorder window holds the batch back, before the future resolves."""
         fut: Future[IngestResult] = Future()
         size = len(payload)
         self.stats.received(size)
@@ -214,7 +220,7 @@ class Engine:
             report = self._refusals.refuse_unread(size, key_sensor_id, "batch_too_large", detail)
             fut.set_result(IngestResult(False, error=report))
             return fut
-        item = Item(payload, key_sensor_id, source, fut, batch)
+        item = Item(payload, key_sensor_id, source, fut, batch, on_held=on_held)
         if self._stopping.is_set() or self._thread is None:
             self._refusals.drop(item, "the service is stopping")
             return fut
@@ -306,6 +312,11 @@ class Engine:
         :meth:`replace_config`."""
         return self._config.patch(patch)
 
+    def apply_config(self, doc: Any, *, merge: bool = False) -> ConfigApplied:
+        """:meth:`replace_config` (or :meth:`patch_config` with ``merge``), saying what
+        changed and where it was saved."""
+        return self._config.apply(doc, merge=merge)
+
     # -- reading ----------------------------------------------------------------------------
 
     @property
@@ -319,6 +330,11 @@ class Engine:
     def latest_report_bytes(self) -> bytes:
         """The latest Track report as published, JSON bytes."""
         return self._state.data
+
+    @property
+    def report_state(self) -> ReportState:
+        """The latest report and tracks (replaced as a whole; do not modify it)."""
+        return self._state
 
     def tracks(self, status: str = "confirmed", kinds: set[str] | None = None) -> dict[str, Any]:
         """The latest report with its tracks filtered: ``status`` is ``confirmed``,
@@ -442,6 +458,8 @@ class Engine:
             self._recent.add(batch.sensor_id, digest)
         if ingest.reorder_window > 0 and (last is None or batch.time >= last):
             self._held.hold(item, batch)
+            if item.on_held is not None:
+                item.on_held()
             return
         self._process(item, batch)
 
@@ -479,4 +497,5 @@ class Engine:
             )
         self.stats.processed(seq, result.time, len(batch.detections), ms, len(confirmed))
         self._out.tracks(state.data)
+        self.view.publish(state, scan.z)
         item.future.set_result(IngestResult(True, seq))

@@ -22,7 +22,7 @@ import re
 import threading
 import time
 from collections import OrderedDict, deque
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from concurrent.futures import Future
 from dataclasses import dataclass, field
 from itertools import pairwise
@@ -88,6 +88,8 @@ class Item:
     batch: DetectionBatchIn | None = None
     arrived: float = field(default_factory=time.monotonic)
     digest: bytes | None = None
+    #: Called (on the worker) when the batch is held back by the reorder window.
+    on_held: Callable[[], None] | None = None
 
 
 def check_batch(

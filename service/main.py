@@ -15,23 +15,33 @@ import subprocess
 import sys
 import threading
 from collections.abc import AsyncIterator, Sequence
+from pathlib import Path
 from typing import Any
 
 import uvicorn
 import zenoh
 from fastapi import FastAPI
+from fastapi.openapi.docs import (
+    get_redoc_html,
+    get_swagger_ui_html,
+    get_swagger_ui_oauth2_redirect_html,
+)
 from fastapi.openapi.utils import get_openapi
+from fastapi.responses import HTMLResponse
+from fastapi.staticfiles import StaticFiles
 
 from service import __version__
 from service.api import api_router
 from service.api.methods import AllowedMethods
+from service.api.view import VIEW_DIR
+from service.api.view import router as view_router
 from service.config_store import load_config_file
 from service.config_tree import ConfigDocument, ConfigError, ConfigPatch
 from service.engine import Engine
 from service.files import remove_stale_temporaries
 from service.keys import local_endpoints
 from service.schemas import DetectionBatchIn, IngestConfig
-from service.settings import Settings, SettingsLoadError, load_settings
+from service.settings import Settings, SettingsLoadError, api_token_source, load_settings
 from service.state_store import StateStore
 from service.stats import Stats
 from service.zenoh_io import ZenohIO
@@ -46,12 +56,22 @@ log = logging.getLogger("service")
 SWITCH_INTERVAL = 0.001
 
 
-def _resolve_token(settings: Settings) -> str:
+def _resolve_token(settings: Settings, source: str | None = None) -> str:
+    """The bearer token for writes; says on stderr where it came from (a set one is not
+    shown; a generated one is, once)."""
     if settings.api_token is not None:
+        print(
+            f"tracker-service: the token for writes comes from {source or 'the settings'} "
+            "(not shown)",
+            file=sys.stderr,
+            flush=True,
+        )
         return settings.api_token.get_secret_value()
     token = secrets.token_urlsafe(24)
     print(
-        f"tracker-service: no TRACKER_API_TOKEN set; the API token for writes is: {token}",
+        "tracker-service: no TRACKER_API_TOKEN or --api-token set: generated for this run "
+        f"(export TRACKER_API_TOKEN=... before starting to choose your own); "
+        f"the API token for writes is: {token}",
         file=sys.stderr,
         flush=True,
     )
@@ -162,6 +182,7 @@ class ServiceRuntime:
                 self.demo = None
             # no new batches; the queued ones are tracked and their reports still go out
             self.zenoh.stop_intake()
+            self.engine.view.close()  # end the live view's streams
             self.engine.stop()
             self.zenoh.close()
             self.zenoh = None
@@ -187,11 +208,12 @@ def _state_store(settings: Settings) -> StateStore | None:
     )
 
 
-def create_app(settings: Settings | None = None) -> FastAPI:
+def create_app(settings: Settings | None = None, token_source: str | None = None) -> FastAPI:
     """The service as a FastAPI app. The engine is built here (loading ``config_file`` when it
     exists: a bad file raises :class:`~service.config_store.ConfigError`); the lifespan starts it
     (restoring ``state_file`` when there is a usable one), opens Zenoh (and starts the demo
-    client), and closes everything on shutdown (saving ``state_file``)."""
+    client), and closes everything on shutdown (saving ``state_file``). ``token_source`` names
+    where a set ``api_token`` came from, for the start-up line."""
     settings = settings or Settings()
     ingest_defaults = IngestConfig(
         max_detections_per_batch=settings.max_detections_per_batch,
@@ -205,6 +227,13 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     tracker_config, ingest = loaded if loaded else (TrackerConfig(), ingest_defaults)
     if loaded:
         log.info("tracker configuration loaded from %s", settings.config_file)
+    log.info(
+        "state folder %s; configuration file %s",
+        settings.state_dir,
+        "none (changes are not saved)"
+        if settings.config_file is None
+        else f"{settings.config_file} ({'loaded' if loaded else 'written at the first change'})",
+    )
     stats = Stats(settings.instance_id, settings.ingest_queue_size)
     engine = Engine(
         tracker_config,
@@ -218,7 +247,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         config_file=settings.config_file,
         state_store=_state_store(settings),
     )
-    token = _resolve_token(settings)
+    token = _resolve_token(settings, token_source)
     runtime = ServiceRuntime(settings, engine)
 
     @contextlib.asynccontextmanager
@@ -234,6 +263,8 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         version=__version__,
         summary="Real-time multi-target tracking: detections in over Zenoh or REST, tracks out.",
         lifespan=lifespan,
+        docs_url=None,  # served below from the package's files, not a CDN
+        redoc_url=None,
     )
     app.state.settings = settings
     app.state.engine = engine
@@ -241,9 +272,55 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.state.api_token = token
     app.state.runtime = runtime
     app.include_router(api_router)
+    app.include_router(view_router)
+    app.mount("/view/assets", StaticFiles(directory=VIEW_DIR), name="view-assets")
+    _offline_docs(app)
     app.add_middleware(AllowedMethods, openapi=lambda: app.openapi())
     _extend_openapi(app)
     return app
+
+
+def _docs_assets() -> Path:
+    """The folder of Swagger UI's and ReDoc's files (the ``fastapi-offline`` package's:
+    Swagger UI 5, which reads the OpenAPI 3.1 documents FastAPI writes)."""
+    import fastapi_offline
+
+    return Path(fastapi_offline.__file__).resolve().parent / "static"
+
+
+def _offline_docs(app: FastAPI) -> None:
+    """``/docs`` (Swagger UI) and ``/redoc`` with their files served by the service itself,
+    so the documentation works with no Internet access."""
+    assets = "/docs/assets"
+    app.mount(assets, StaticFiles(directory=_docs_assets()), name="docs-assets")
+    openapi_url = app.openapi_url or "/openapi.json"
+    oauth2_redirect = app.swagger_ui_oauth2_redirect_url or "/docs/oauth2-redirect"
+
+    @app.get("/docs", include_in_schema=False)
+    async def swagger_ui() -> HTMLResponse:
+        return get_swagger_ui_html(
+            openapi_url=openapi_url,
+            title=f"{app.title} - Swagger UI",
+            oauth2_redirect_url=oauth2_redirect,
+            swagger_js_url=f"{assets}/swagger-ui-bundle.js",
+            swagger_css_url=f"{assets}/swagger-ui.css",
+            swagger_favicon_url=f"{assets}/favicon.png",
+            swagger_ui_parameters={"validatorUrl": None},  # no badge from validator.swagger.io
+        )
+
+    @app.get(oauth2_redirect, include_in_schema=False)
+    async def swagger_ui_redirect() -> HTMLResponse:
+        return get_swagger_ui_oauth2_redirect_html()
+
+    @app.get("/redoc", include_in_schema=False)
+    async def redoc() -> HTMLResponse:
+        return get_redoc_html(
+            openapi_url=openapi_url,
+            title=f"{app.title} - ReDoc",
+            redoc_js_url=f"{assets}/redoc.standalone.js",
+            redoc_favicon_url=f"{assets}/favicon.png",
+            with_google_fonts=False,
+        )
 
 
 def _extend_openapi(app: FastAPI) -> None:
@@ -269,6 +346,17 @@ def _extend_openapi(app: FastAPI) -> None:
         return schema
 
     app.openapi = openapi  # type: ignore[method-assign]
+
+
+def view_url(host: str, port: int) -> str:
+    """The live view's address on ``host`` (a wildcard address: on this machine)."""
+    if host in ("", "0.0.0.0"):
+        host = "127.0.0.1"
+    elif host == "::":
+        host = "::1"
+    if ":" in host:
+        host = f"[{host}]"
+    return f"http://{host}:{port}/view"
 
 
 def _configure_logging(level: str) -> None:
@@ -304,7 +392,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 2
     _configure_logging(settings.log_level)
     try:
-        app = create_app(settings)
+        app = create_app(settings, api_token_source(argv))
     except ConfigError as exc:
         print(f"tracker-service: {exc}", file=sys.stderr)
         return 2
@@ -325,6 +413,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     except ZenohStartError as exc:
         print(f"tracker-service: {exc}", file=sys.stderr)
         return 1
+    log.info("live view: %s", view_url(settings.http_host, settings.http_port))
 
     # uvicorn re-raises the signal it stopped on once it is done; with these handlers in
     # place that re-raise is harmless and the process exits with status 0.

@@ -402,6 +402,10 @@ class StatsOut(BaseModel):
     queue_capacity: int
     held_for_reorder: int
     processing_ms: ProcessingTimesOut
+    viewers: int = Field(description="live view streams connected (GET /api/v1/stream)")
+    view_frames_dropped: int = Field(
+        description="live view frames replaced by a newer one before their viewer took them"
+    )
 
 
 class IngestConfig(BaseModel):

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import re
 import secrets
 import tomllib
@@ -17,7 +18,14 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Annotated, Any, Literal
 
-from pydantic import Field, SecretStr, ValidationError, ValidationInfo, field_validator
+from pydantic import (
+    Field,
+    SecretStr,
+    ValidationError,
+    ValidationInfo,
+    field_validator,
+    model_validator,
+)
 from pydantic.fields import FieldInfo
 from pydantic_settings import (
     BaseSettings,
@@ -30,11 +38,31 @@ from service.keys import DEFAULT_PREFIX
 from service.payload import DEFAULT_MAX_BATCH_BYTES, DEFAULT_QUEUE_BYTES
 from service.schemas import MAX_REORDER_WINDOW, IngestConfig
 
-__all__ = ["Settings", "SettingsLoadError", "build_parser", "load_settings", "split_endpoints"]
+__all__ = [
+    "DEFAULT_CONFIG_NAME",
+    "Settings",
+    "SettingsLoadError",
+    "api_token_source",
+    "build_parser",
+    "default_state_dir",
+    "load_settings",
+    "split_endpoints",
+]
+
+#: The config file's name in ``state_dir`` when ``config_file`` is not set.
+DEFAULT_CONFIG_NAME = "config.json"
 
 _INGEST = IngestConfig.model_fields
 _KEY_PREFIX_RE = re.compile(r"^[^/*$#?\s]+(/[^/*$#?\s]+)*$")
 _INSTANCE_RE = re.compile(r"^[A-Za-z0-9_.\-]{1,64}$")
+
+
+def default_state_dir() -> Path:
+    """``$XDG_STATE_HOME/tracker-service`` when that variable is set (an absolute path), else
+    ``~/.local/state/tracker-service``."""
+    xdg = os.environ.get("XDG_STATE_HOME", "").strip()
+    base = Path(xdg) if xdg and Path(xdg).is_absolute() else Path.home() / ".local" / "state"
+    return base / "tracker-service"
 
 
 def split_endpoints(value: Any) -> list[str]:
@@ -114,9 +142,19 @@ class Settings(BaseSettings):
     api_token: SecretStr | None = Field(
         default=None, description="bearer token for writes; generated and printed once when unset"
     )
+    state_dir: Path = Field(
+        default_factory=lambda: default_state_dir(),
+        description=(
+            "folder of the service's own files (the config file by default): "
+            "$XDG_STATE_HOME/tracker-service, else ~/.local/state/tracker-service"
+        ),
+    )
     config_file: Path | None = Field(
         default=None,
-        description="tracker configuration JSON: loaded at start, saved on each change",
+        description=(
+            "tracker configuration JSON: loaded at start, saved on each change "
+            "(default <state_dir>/config.json; 'none': not loaded, not saved)"
+        ),
     )
     state_file: Path | None = Field(
         default=None,
@@ -221,13 +259,22 @@ class Settings(BaseSettings):
             raise ValueError("must be 1 to 64 of A-Z a-z 0-9 _ . -")
         return value
 
-    @field_validator("state_file")
+    @field_validator("config_file", "state_file", mode="before")
     @classmethod
-    def _check_state_file(cls, value: Path | None, info: ValidationInfo) -> Path | None:
-        config = info.data.get("config_file")
-        if value is not None and config is not None and value.resolve() == config.resolve():
-            raise ValueError("must not be the config_file")
+    def _none_path(cls, value: Any) -> Any:
+        if isinstance(value, str) and value.strip().lower() in ("", "none"):
+            return None
         return value
+
+    @model_validator(mode="after")
+    def _default_config_file(self) -> Settings:
+        """``config_file`` left unset is ``<state_dir>/config.json`` (set to none: no file)."""
+        if "config_file" not in self.model_fields_set and self.config_file is None:
+            self.config_file = self.state_dir / DEFAULT_CONFIG_NAME
+        config, state = self.config_file, self.state_file
+        if config is not None and state is not None and state.resolve() == config.resolve():
+            raise ValueError("state_file: must not be the config_file")
+        return self
 
     @field_validator("api_token")
     @classmethod
@@ -303,6 +350,8 @@ def _default_text(name: str, field: FieldInfo) -> str | None:
         return "random"  # a new one from its factory on every start
     if name == "api_token":
         return None
+    if name == "config_file":
+        return f"<state_dir>/{DEFAULT_CONFIG_NAME}"
     default = field.get_default(call_default_factory=True)
     if default is None:
         return None
@@ -346,6 +395,16 @@ def _describe(exc: ValidationError) -> str:
             msg = "unknown setting"
         lines.append(f"invalid setting {name} / TRACKER_{name.upper()}: {msg}{shown}")
     return "\n".join(lines)
+
+
+def api_token_source(argv: Sequence[str] | None = None) -> str:
+    """Where the ``api_token`` that :func:`load_settings` found for ``argv`` came from (when
+    one was found): the flag, the environment, or else the settings file."""
+    if "api_token" in vars(build_parser().parse_known_args(argv)[0]):
+        return "the --api-token flag"
+    if any(k.upper() == "TRACKER_API_TOKEN" and v.strip() for k, v in os.environ.items()):
+        return "the TRACKER_API_TOKEN environment variable"
+    return "the settings file"
 
 
 def load_settings(argv: Sequence[str] | None = None, **overrides: Any) -> Settings:

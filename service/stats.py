@@ -77,6 +77,7 @@ class Stats:
         self.tracks_tentative: Callable[[], int] = lambda: 0
         self.queue_depth: Callable[[], int] = lambda: 0
         self.held_for_reorder: Callable[[], int] = lambda: 0
+        self.viewers: Callable[[], int] = lambda: 0  # live view streams connected
         self.seq = 0
         self.last_time: float | None = None
         self.tracks_confirmed = 0
@@ -141,6 +142,14 @@ class Stats:
         Gauge("tracker_last_seq", "seq of the last Track report.", registry=r).set_function(
             lambda: self.seq
         )
+        Gauge(
+            "tracker_view_viewers", "Live view streams connected (GET /api/v1/stream).", registry=r
+        ).set_function(lambda: self.viewers())
+        self._view_dropped = Counter(
+            "tracker_view_frames_dropped",
+            "Live view frames replaced by a newer one before their viewer took them.",
+            registry=r,
+        )
         self._processing = Histogram(
             "tracker_processing_seconds",
             "Tracker time per processed batch.",
@@ -168,6 +177,9 @@ class Stats:
 
     def dropped(self) -> None:
         self._dropped.inc()
+
+    def view_frame_dropped(self) -> None:
+        self._view_dropped.inc()
 
     def processed(
         self,
@@ -241,6 +253,8 @@ class Stats:
             "queue_capacity": self.queue_capacity,
             "held_for_reorder": int(self.held_for_reorder()),
             "processing_ms": self.percentiles(),
+            "viewers": int(self.viewers()),
+            "view_frames_dropped": _count(self._view_dropped),
         }
 
     def prometheus(self) -> bytes:

@@ -5,11 +5,15 @@ never hangs on a live callback."""
 from __future__ import annotations
 
 import json
+import os
+import shutil
 import socket
+import tempfile
 import threading
 import time
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 import pytest
@@ -22,6 +26,21 @@ def free_port() -> int:
     with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
         s.bind(("127.0.0.1", 0))
         return int(s.getsockname()[1])
+
+
+@pytest.fixture(autouse=True, scope="session")
+def _no_real_state_folder(tmp_path_factory: pytest.TempPathFactory) -> Iterator[None]:
+    """Services the tests start (in process or as subprocesses, which inherit the
+    environment) keep their default state folder under a temporary one, never the user's."""
+    old = os.environ.get("XDG_STATE_HOME")
+    os.environ["XDG_STATE_HOME"] = str(tmp_path_factory.mktemp("xdg-state"))
+    try:
+        yield
+    finally:
+        if old is None:
+            os.environ.pop("XDG_STATE_HOME", None)
+        else:
+            os.environ["XDG_STATE_HOME"] = old
 
 
 @pytest.fixture
@@ -40,6 +59,7 @@ class RunningService:
     app: Any
     server: Any
     thread: threading.Thread
+    state_dir: Path | None = None
 
     @property
     def engine(self) -> Any:
@@ -52,16 +72,20 @@ class RunningService:
     def stop(self) -> None:
         self.server.should_exit = True
         self.thread.join(10)
+        if self.state_dir is not None:
+            shutil.rmtree(self.state_dir, ignore_errors=True)
 
 
 def start_service(**overrides: Any) -> RunningService:
-    """Start the real service (uvicorn in a thread, Zenoh peer on a free loopback port)."""
+    """Start the real service (uvicorn in a thread, Zenoh peer on a free loopback port), with
+    a state folder of its own (removed when it stops) unless ``state_dir`` is given."""
     import uvicorn
 
     from service.main import create_app
     from service.settings import Settings
 
     zport, hport = free_port(), free_port()
+    own_state_dir = None if "state_dir" in overrides else Path(tempfile.mkdtemp("-tracker"))
     values: dict[str, Any] = {
         "zenoh_mode": "peer",
         "zenoh_listen": f"tcp/127.0.0.1:{zport}",
@@ -72,6 +96,8 @@ def start_service(**overrides: Any) -> RunningService:
         "key_prefix": "tracking",
         "log_level": "warning",
     }
+    if own_state_dir is not None:
+        values["state_dir"] = own_state_dir
     values.update(overrides)
     settings = Settings(**values)
     app = create_app(settings)
@@ -92,6 +118,8 @@ def start_service(**overrides: Any) -> RunningService:
         if not thread.is_alive() or time.monotonic() > deadline:
             server.should_exit = True
             thread.join(5)
+            if own_state_dir is not None:
+                shutil.rmtree(own_state_dir, ignore_errors=True)
             raise RuntimeError("the service did not start")
         time.sleep(0.01)
     return RunningService(
@@ -102,6 +130,7 @@ def start_service(**overrides: Any) -> RunningService:
         app=app,
         server=server,
         thread=thread,
+        state_dir=own_state_dir,
     )
 
 

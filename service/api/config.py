@@ -3,12 +3,15 @@
 
 Writes need ``Authorization: Bearer <token>``, are validated as a whole (422 naming the
 field, nothing changes), saved to the config file when one is set, and take effect on the
-next batch.
+next batch. The answer's body is the document in force; its headers ``X-Config-Changed``
+(``motion.q_cv 0.5 -> 1.0; ...``) and ``X-Config-Saved-To`` say what changed and where it
+was saved, and the log says the same (``configuration applied: ...``).
 """
 
 from __future__ import annotations
 
 from typing import Any
+from urllib.parse import quote
 
 import orjson
 from fastapi import APIRouter, HTTPException, Request
@@ -17,6 +20,7 @@ from fastapi.responses import Response
 
 from service.api.deps import EngineDep, FastJSONResponse, WriteAccess
 from service.config_tree import ConfigDocument, ConfigError
+from service.engine import Engine
 
 __all__ = ["router"]
 
@@ -59,14 +63,52 @@ async def _read_json(request: Request) -> Any:
         raise HTTPException(status_code=422, detail=f"invalid JSON: {exc}") from None
 
 
-async def _apply(method: Any, doc: Any) -> Response:
+#: Headers of a PUT or PATCH answer that say what it did (the body stays the document).
+CHANGED_HEADER = "X-Config-Changed"
+SAVED_TO_HEADER = "X-Config-Saved-To"
+_MAX_HEADER_CHARS = 4000
+
+
+def _header_value(text: str) -> str:
+    """``text`` as a header value: non-ASCII characters percent-encoded, cut to a length
+    every proxy passes."""
+    if not text.isascii():
+        text = quote(text, safe=" /:;,.-_~>()[]{}\"'=+*!@$&|<")
+    if len(text) > _MAX_HEADER_CHARS:
+        text = text[: _MAX_HEADER_CHARS - 4] + " ..."
+    return text
+
+
+async def _apply(engine: Engine, doc: Any, *, merge: bool) -> Response:
     try:
-        out = await run_in_threadpool(method, doc)
+        applied = await run_in_threadpool(lambda: engine.apply_config(doc, merge=merge))
     except ConfigError as exc:
         raise HTTPException(status_code=422, detail=str(exc)) from None
     except OSError as exc:
         raise HTTPException(status_code=500, detail=str(exc)) from None
-    return FastJSONResponse(out)
+    response = FastJSONResponse(applied.document)
+    response.headers[CHANGED_HEADER] = _header_value("; ".join(applied.changes) or "none")
+    if applied.saved_to is not None:
+        response.headers[SAVED_TO_HEADER] = _header_value(str(applied.saved_to))
+    return response
+
+
+_CHANGE_HEADERS = {
+    CHANGED_HEADER: {
+        "description": (
+            "what changed, `section.field old -> new` joined by `; ` (`none` when nothing did)"
+        ),
+        "schema": {"type": "string"},
+    },
+    SAVED_TO_HEADER: {
+        "description": "the config file it was saved to (absent when there is none)",
+        "schema": {"type": "string"},
+    },
+}
+_WRITE_RESPONSES[200] = {
+    "description": "the configuration now in force",
+    "headers": _CHANGE_HEADERS,
+}
 
 
 @router.put(
@@ -77,7 +119,7 @@ async def _apply(method: Any, doc: Any) -> Response:
     responses=_WRITE_RESPONSES,
 )
 async def put_config(request: Request, engine: EngineDep, _auth: WriteAccess) -> Response:
-    return await _apply(engine.replace_config, await _read_json(request))
+    return await _apply(engine, await _read_json(request), merge=False)
 
 
 @router.patch(
@@ -90,4 +132,4 @@ async def put_config(request: Request, engine: EngineDep, _auth: WriteAccess) ->
     responses=_WRITE_RESPONSES,
 )
 async def patch_config(request: Request, engine: EngineDep, _auth: WriteAccess) -> Response:
-    return await _apply(engine.patch_config, await _read_json(request))
+    return await _apply(engine, await _read_json(request), merge=True)

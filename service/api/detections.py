@@ -4,7 +4,8 @@ The body is read up to ``max_batch_bytes`` (a larger one is read to its end, kep
 refused as ``batch_too_large``), then validated off the event loop (422 with an Error report
 when it breaks the contract), then queued for the tracker like a Zenoh batch; the answer
 waits for the tracker: 202 with the Track report's ``seq``, 422 when the tracker refused it
-(out of sequence, a duplicate), 503 when the ingest queue stayed full.
+(out of sequence, a duplicate), 503 when the ingest queue stayed full; 202 with ``seq`` null
+at once when the reorder window holds the batch back.
 
 At most :data:`INGEST_SLOTS` batches are read and validated at once: each holds its payload
 and what validating it costs, so many senders at once do not multiply that; the others wait
@@ -104,12 +105,26 @@ async def post_detections(request: Request, engine: EngineDep) -> Response:
             reject = functools.partial(engine.reject, payload, None, exc.reason, exc.detail)
             report = await loop.run_in_executor(_decoders, reject)
             return FastJSONResponse(report, status_code=422)
-    future = await run_in_threadpool(engine.submit, payload, None, "rest", batch=batch)
-    wait = 30.0 + 2.0 * engine.ingest.reorder_window
+    # A batch the reorder window holds back is answered at once (seq null): it may wait up to
+    # the window, and the sender need not.
+    held = asyncio.Event()
+    submit = functools.partial(
+        engine.submit,
+        payload,
+        None,
+        "rest",
+        batch=batch,
+        on_held=lambda: loop.call_soon_threadsafe(held.set),
+    )
+    future = asyncio.wrap_future(await run_in_threadpool(submit))
+    held_wait = asyncio.ensure_future(held.wait())
     try:
-        result = await asyncio.wait_for(asyncio.wrap_future(future), timeout=wait)
-    except TimeoutError:
+        await asyncio.wait({future, held_wait}, timeout=30.0, return_when=asyncio.FIRST_COMPLETED)
+    finally:
+        held_wait.cancel()
+    if not future.done():
         return FastJSONResponse({"accepted": True, "seq": None}, status_code=202)
+    result = future.result()
     if result.accepted:
         return FastJSONResponse({"accepted": True, "seq": result.seq}, status_code=202)
     report = result.error or {}

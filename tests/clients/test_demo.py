@@ -69,7 +69,7 @@ def test_demo_publishes_after_the_latest_time_and_logs_summaries(
         assert stats["batches_rejected"] == 0 and stats["batches_dropped"] == 0
         report = service.engine.latest_report()
         assert report["sensor_id"] == "radar-1" and report["time"] > 500.0
-        assert len(report["tracks"]) >= 40
+        assert len(report["tracks"]) >= 25
         demo.close()
     finally:
         session.close()
@@ -100,7 +100,7 @@ def test_demo_process_stops_cleanly_on_sigterm(service: RunningService) -> None:
         proc.send_signal(signal.SIGTERM)
         _, err = proc.communicate(timeout=5)
         assert proc.returncode == 0, err
-        assert "demo: publishing the reference scenario to" in err
+        assert "demo: publishing the continuous scenario to" in err
         assert "demo: stopped after" in err and "Traceback" not in err
     finally:
         if proc.poll() is None:

@@ -281,3 +281,30 @@ def test_invalid_configs() -> None:
     assert simulate(ScenarioConfig(n_scans=0)) == []
     empty = simulate(ScenarioConfig(n_targets=0, n_scans=3))
     assert all(s.truth_states.shape == (0, 4) for s in empty)
+
+
+def test_continuous_scenario_targets_come_and_go_one_by_one() -> None:
+    import itertools
+
+    from clients.scenarios.continuous import ContinuousScenario
+
+    scenario = ContinuousScenario(seed=4)
+    scans = list(itertools.islice(scenario.scans(), 300))
+    again = list(itertools.islice(ContinuousScenario(seed=4).scans(), 300))
+    assert all(np.array_equal(a.z, b.z) for a, b in zip(scans, again, strict=True))
+    assert [s.time for s in scans[:3]] == [0.0, 1.0, 2.0]
+    alive = [set(s.truth_ids.tolist()) for s in scans]
+    ended = [len(a - b) for a, b in itertools.pairwise(alive)]
+    born = [len(b - a) for a, b in itertools.pairwise(alive)]
+    assert sum(ended) >= 50 and sum(born) >= 50  # a turnover, not one population
+    assert max(ended) <= 5 and all(alive)  # never all at once
+    assert 30 <= np.mean([len(a) for a in alive]) <= 70
+    assert not alive[0] & alive[-1] or len(alive[0] & alive[-1]) < len(alive[0])
+    speeds = np.concatenate([np.hypot(*s.truth_states[:, 2:].T) for s in scans])
+    assert np.median(speeds) > 5 and speeds.max() < 300  # walkers to airliners
+    clutter = [int((s.target_of_detection == -1).sum()) for s in scans]
+    assert 10 < np.mean(clutter) < 30
+    detected = sum(int((s.target_of_detection >= 0).sum()) for s in scans)
+    assert 0.85 < detected / sum(len(a) for a in alive) < 0.95
+    batch = scans[0].to_batch()
+    assert batch["sensor_id"] == "radar-1" and batch["pd"] == 0.9

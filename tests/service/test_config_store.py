@@ -3,13 +3,20 @@ hand-over to the worker, and atomic saving."""
 
 from __future__ import annotations
 
+import logging
 import os
 from pathlib import Path
 
 import orjson
 import pytest
 
-from service.config_store import ConfigStore, load_config_file, merge_patch, save_config_file
+from service.config_store import (
+    ConfigStore,
+    config_changes,
+    load_config_file,
+    merge_patch,
+    save_config_file,
+)
 from service.config_tree import ConfigError, config_document, validate_config_document
 from service.schemas import IngestConfig
 from trackers.config import TrackerConfig
@@ -95,3 +102,37 @@ def test_merge_patch() -> None:
         "a": {"c": 2, "d": 3}
     }
     assert merge_patch({"a": 1}, {"a": [1, 2]}) == {"a": [1, 2]}
+
+
+def test_config_changes_name_each_changed_field() -> None:
+    old = {"motion": {"q_cv": 0.5, "models": ["cv", "ct"]}, "gating": {"gate_probability": 0.9}}
+    new = {"motion": {"q_cv": 1.0, "models": ["cv"]}, "gating": {"gate_probability": 0.9}}
+    assert config_changes(old, new) == [
+        "motion.q_cv 0.5 -> 1.0",
+        'motion.models ["cv","ct"] -> ["cv"]',
+    ]
+    assert config_changes(old, old) == []
+    assert config_changes({"a": {"b": 1}}, {"a": {}, "c": "x"}) == [
+        "a (none) -> {}",
+        "c (none) -> x",
+        "a.b 1 -> (none)",
+    ]
+
+
+def test_apply_says_what_changed_and_where_it_was_saved(
+    tmp_path: Path, caplog: pytest.LogCaptureFixture
+) -> None:
+    path = tmp_path / "config.json"
+    store = ConfigStore(TrackerConfig(), IngestConfig(), ingest_defaults=IngestConfig(), path=path)
+    with caplog.at_level(logging.INFO, logger="service.config"):
+        applied = store.apply({"motion": {"q_cv": 1.0}}, merge=True)
+    assert applied.changes == ("motion.q_cv 0.5 -> 1.0",) and applied.saved_to == path
+    assert applied.document == store.document() == orjson.loads(path.read_bytes())
+    assert f"configuration applied: motion.q_cv 0.5 -> 1.0; saved to {path}" in caplog.text
+    # PUT of the defaults puts it back; the same again changes nothing
+    applied = store.apply(config_document(TrackerConfig(), IngestConfig()))
+    assert applied.changes == ("motion.q_cv 1.0 -> 0.5",)
+    assert store.apply({}, merge=True).summary() == f"nothing changed; saved to {path}"
+    unsaved = ConfigStore(TrackerConfig(), IngestConfig(), ingest_defaults=IngestConfig())
+    applied = unsaved.apply({"gating": {"gate_probability": 0.99}}, merge=True)
+    assert applied.summary() == "gating.gate_probability 0.9999 -> 0.99; not saved"

@@ -5,6 +5,7 @@ liveliness token and REST; bad input; configuration; metrics."""
 from __future__ import annotations
 
 import json
+import time
 from typing import Any
 
 import httpx
@@ -284,6 +285,19 @@ def test_rest_config(service: RunningService, peer: zenoh.Session) -> None:
             assert r.json()["detail"].startswith("track_management.pd")
             r = http.put("/api/v1/config", content=b"{", headers=service.auth)
             assert r.status_code == 422
+            assert "x-config-changed" not in r.headers
+
+            # the answer is the document; its headers say what changed and where it was saved
+            r = http.patch("/api/v1/config", json={"motion": {"q_cv": 1.0}}, headers=service.auth)
+            assert r.status_code == 200 and r.json()["motion"]["q_cv"] == 1.0
+            assert r.headers["x-config-changed"] == "motion.q_cv 0.5 -> 1.0"
+            saved = service.engine.config_file
+            assert saved is not None and r.headers["x-config-saved-to"] == str(saved)
+            assert orjson.loads(saved.read_bytes()) == r.json()
+            r = http.put("/api/v1/config", json=doc, headers=service.auth)
+            assert r.json() == doc and r.headers["x-config-changed"] == "motion.q_cv 1.0 -> 0.5"
+            r = http.patch("/api/v1/config", json={}, headers=service.auth)
+            assert r.headers["x-config-changed"] == "none"
 
             # PATCH is effective on the next batch
             _publish(peer, SCANS[:2])
@@ -396,6 +410,22 @@ def test_custom_prefix_and_reorder_window(service_factory: Any) -> None:
         reports.close()
     finally:
         session.close()
+
+
+def test_rest_answers_a_held_batch_at_once(service_factory: Any) -> None:
+    """With a reorder window, a batch held back is answered 202 with seq null at once, not
+    after the window; a batch that is processed gets its seq."""
+    svc = service_factory(reorder_window=60.0)
+    with httpx.Client(base_url=svc.url, timeout=10) as http:
+        t0 = time.monotonic()
+        r = http.post("/api/v1/detections", content=orjson.dumps(SCANS[0].to_batch()))
+        assert r.status_code == 202 and r.json() == {"accepted": True, "seq": None}
+        assert time.monotonic() - t0 < 5.0
+        # a batch 60 s newer releases the first one
+        late = {**SCANS[1].to_batch(), "time": SCANS[0].time + 61.0}
+        r = http.post("/api/v1/detections", content=orjson.dumps(late))
+        assert r.status_code == 202
+        wait_until(lambda: svc.engine.seq == 1)
 
 
 def _round_trip(session: zenoh.Session, n: int = 5) -> None:

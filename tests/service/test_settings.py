@@ -27,7 +27,8 @@ def test_defaults_match_the_contract() -> None:
     assert s.zenoh_connect == []
     assert s.key_prefix == "tracking"
     assert (s.http_host, s.http_port) == ("127.0.0.1", 8000)
-    assert s.api_token is None and s.config_file is None
+    assert s.api_token is None and s.config_file == s.state_dir / "config.json"
+    assert s.state_file is None
     assert s.max_detections_per_batch == 10000 and s.reorder_window == 0.0
     assert s.tracks_congestion_control == "block"
     assert len(s.instance_id) == 8 and s.instance_id != load_settings([]).instance_id
@@ -155,3 +156,29 @@ def test_the_cost_bounds(monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setenv("TRACKER_MAX_BATCH_BYTES", "65536")
     s = load_settings(["--ingest-queue-bytes", "65536"])
     assert (s.max_batch_bytes, s.ingest_queue_bytes) == (65536, 65536)
+
+
+def test_state_dir_and_config_file_defaults(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.setenv("XDG_STATE_HOME", str(tmp_path / "xdg"))
+    s = load_settings([])
+    assert s.state_dir == tmp_path / "xdg" / "tracker-service"
+    assert s.config_file == tmp_path / "xdg" / "tracker-service" / "config.json"
+    monkeypatch.delenv("XDG_STATE_HOME")
+    monkeypatch.setenv("HOME", str(tmp_path / "home"))
+    assert load_settings([]).state_dir == tmp_path / "home" / ".local/state/tracker-service"
+    s = load_settings(["--state-dir", str(tmp_path / "st")])
+    assert s.config_file == tmp_path / "st" / "config.json"
+    # set explicitly, it wins; 'none' turns saving off, by flag, variable or settings file
+    s = load_settings(["--state-dir", str(tmp_path / "st"), "--config-file", "other.json"])
+    assert s.config_file == Path("other.json")
+    assert load_settings(["--config-file", "none"]).config_file is None
+    monkeypatch.setenv("TRACKER_CONFIG_FILE", "None")
+    assert load_settings([]).config_file is None
+    monkeypatch.delenv("TRACKER_CONFIG_FILE")
+    settings = tmp_path / "s.toml"
+    settings.write_text('config_file = "none"\n')
+    assert load_settings(["--settings-file", str(settings)]).config_file is None
+    with pytest.raises(SettingsLoadError, match="must not be the config_file"):
+        load_settings(["--state-dir", str(tmp_path), "--state-file", str(tmp_path / "config.json")])

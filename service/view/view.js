@@ -1,0 +1,446 @@
+// The live view: a plan view of the tracks, fed by GET /api/v1/stream (server-sent events).
+// Plain JavaScript, no dependencies. World coordinates are metres, x east, y north.
+"use strict";
+
+(function () {
+  const TRAIL_POINTS = 40; // positions kept per track, client-side
+  const VECTOR_SECONDS = 10; // a velocity vector shows where the track is in this many seconds
+  const PICK_PIXELS = 12; // a click this close to a track selects it
+  const DRAG_PIXELS = 4; // a press that moves less than this is a click
+
+  const canvas = document.getElementById("plan");
+  const ctx = canvas.getContext("2d");
+  const el = (id) => document.getElementById(id);
+
+  // what the latest frame holds, and what is kept across frames
+  const model = {
+    seq: null,
+    time: null,
+    confirmed: [],
+    tentative: [],
+    detections: [], // flat [x0, y0, x1, y1, ...]
+    trails: new Map(), // id -> [[x, y], ...]
+    selected: null, // id of the clicked track
+    frames: 0,
+  };
+
+  // screen = (offsetX + x * scale, offsetY - y * scale), in CSS pixels
+  const view = { scale: 0.01, offsetX: 0, offsetY: 0, userMoved: false };
+
+  const toScreen = (x, y) => [view.offsetX + x * view.scale, view.offsetY - y * view.scale];
+  const toWorld = (sx, sy) => [(sx - view.offsetX) / view.scale, (view.offsetY - sy) / view.scale];
+
+  // -- drawing, one small function per track kind -------------------------------------------
+
+  function drawVelocity(t, sx, sy, color) {
+    const [ex, ey] = toScreen(
+      t.position[0] + t.velocity[0] * VECTOR_SECONDS,
+      t.position[1] + t.velocity[1] * VECTOR_SECONDS,
+    );
+    ctx.strokeStyle = color;
+    ctx.beginPath();
+    ctx.moveTo(sx, sy);
+    ctx.lineTo(ex, ey);
+    ctx.stroke();
+    const angle = Math.atan2(ey - sy, ex - sx);
+    if (Math.hypot(ex - sx, ey - sy) > 6) {
+      ctx.beginPath();
+      ctx.moveTo(ex, ey);
+      ctx.lineTo(ex - 6 * Math.cos(angle - 0.4), ey - 6 * Math.sin(angle - 0.4));
+      ctx.lineTo(ex - 6 * Math.cos(angle + 0.4), ey - 6 * Math.sin(angle + 0.4));
+      ctx.closePath();
+      ctx.fillStyle = color;
+      ctx.fill();
+    }
+  }
+
+  function drawTrail(t, color) {
+    const trail = model.trails.get(t.id);
+    if (!trail || trail.length < 2) return;
+    ctx.strokeStyle = color;
+    ctx.lineWidth = 1;
+    ctx.beginPath();
+    trail.forEach(([x, y], i) => {
+      const [sx, sy] = toScreen(x, y);
+      if (i === 0) ctx.moveTo(sx, sy);
+      else ctx.lineTo(sx, sy);
+    });
+    ctx.stroke();
+  }
+
+  // an individual target: a dot, its velocity vector, its trail and its id
+  function drawIndividual(t, style) {
+    const [sx, sy] = toScreen(t.position[0], t.position[1]);
+    ctx.globalAlpha = style.alpha;
+    drawTrail(t, style.trail);
+    ctx.lineWidth = 1.5;
+    drawVelocity(t, sx, sy, style.color);
+    ctx.fillStyle = style.color;
+    ctx.beginPath();
+    ctx.arc(sx, sy, style.radius, 0, 2 * Math.PI);
+    ctx.fill();
+    if (style.selected) {
+      ctx.strokeStyle = "#ffffff";
+      ctx.lineWidth = 2;
+      ctx.beginPath();
+      ctx.arc(sx, sy, style.radius + 5, 0, 2 * Math.PI);
+      ctx.stroke();
+    }
+    if (style.label) {
+      ctx.fillStyle = style.color;
+      ctx.font = "12px system-ui, sans-serif";
+      ctx.fillText(t.id, sx + 7, sy - 7);
+    }
+    ctx.globalAlpha = 1;
+  }
+
+  // any kind this page does not know yet: a hollow square at its position
+  function drawOther(t, style) {
+    const [sx, sy] = toScreen(t.position[0], t.position[1]);
+    ctx.globalAlpha = style.alpha;
+    ctx.strokeStyle = style.color;
+    ctx.lineWidth = 1.5;
+    ctx.strokeRect(sx - 5, sy - 5, 10, 10);
+    if (style.label) {
+      ctx.fillStyle = style.color;
+      ctx.fillText(`${t.id} (${t.kind})`, sx + 7, sy - 7);
+    }
+    ctx.globalAlpha = 1;
+  }
+
+  // by track kind; `extended` (ellipses) and `formation` (members joined) come later
+  const DRAW_KIND = { individual: drawIndividual };
+
+  function drawTrack(t, style) {
+    (DRAW_KIND[t.kind] || drawOther)(t, style);
+  }
+
+  function niceStep(metres) {
+    const p = Math.pow(10, Math.floor(Math.log10(metres)));
+    for (const m of [1, 2, 5, 10]) if (m * p >= metres) return m * p;
+    return 10 * p;
+  }
+
+  function formatMetres(m) {
+    return m >= 1000 ? `${m / 1000} km` : `${m} m`;
+  }
+
+  function drawGrid(w, h) {
+    const step = niceStep(80 / view.scale);
+    const [x0, y1] = toWorld(0, 0);
+    const [x1, y0] = toWorld(w, h);
+    ctx.strokeStyle = "#1f2a36";
+    ctx.lineWidth = 1;
+    ctx.beginPath();
+    for (let x = Math.ceil(x0 / step) * step; x <= x1; x += step) {
+      const [sx] = toScreen(x, 0);
+      ctx.moveTo(Math.round(sx) + 0.5, 0);
+      ctx.lineTo(Math.round(sx) + 0.5, h);
+    }
+    for (let y = Math.ceil(y0 / step) * step; y <= y1; y += step) {
+      const [, sy] = toScreen(0, y);
+      ctx.moveTo(0, Math.round(sy) + 0.5);
+      ctx.lineTo(w, Math.round(sy) + 0.5);
+    }
+    ctx.stroke();
+    const scaleBar = el("scale");
+    scaleBar.style.width = `${step * view.scale}px`;
+    scaleBar.textContent = formatMetres(step);
+  }
+
+  const screenTracks = []; // what was drawn, for picking and for tests
+
+  function render() {
+    const w = canvas.clientWidth;
+    const h = canvas.clientHeight;
+    const dpr = window.devicePixelRatio || 1;
+    if (canvas.width !== Math.round(w * dpr) || canvas.height !== Math.round(h * dpr)) {
+      canvas.width = Math.round(w * dpr);
+      canvas.height = Math.round(h * dpr);
+    }
+    ctx.setTransform(dpr, 0, 0, dpr, 0, 0);
+    ctx.clearRect(0, 0, w, h);
+    drawGrid(w, h);
+
+    if (el("show-detections").checked) {
+      ctx.fillStyle = "#f0b95a";
+      const d = model.detections;
+      for (let i = 0; i + 1 < d.length; i += 2) {
+        const [sx, sy] = toScreen(d[i], d[i + 1]);
+        ctx.fillRect(sx - 1.5, sy - 1.5, 3, 3);
+      }
+    }
+
+    screenTracks.length = 0;
+    const showTentative = el("show-tentative").checked;
+    const drawn = showTentative ? model.tentative.concat(model.confirmed) : model.confirmed;
+    for (const t of drawn) {
+      const confirmed = t.status === "confirmed";
+      drawTrack(t, {
+        alpha: confirmed ? 1 : 0.35,
+        color: confirmed ? "#5fb8ff" : "#9aa7b5",
+        trail: confirmed ? "#2f6d9c" : "#56606b",
+        radius: confirmed ? 4 : 3,
+        label: confirmed,
+        selected: t.id === model.selected,
+      });
+      const [sx, sy] = toScreen(t.position[0], t.position[1]);
+      screenTracks.push({ id: t.id, kind: t.kind, status: t.status, sx, sy });
+    }
+    publishState(drawn);
+  }
+
+  // -- what a test (or a curious user) can read -----------------------------------------------
+
+  function publishState(drawn) {
+    const list = el("track-list");
+    const ids = drawn.map((t) => t.id).join(",");
+    if (list.dataset.ids !== ids) {
+      list.dataset.ids = ids;
+      list.replaceChildren(
+        ...drawn.map((t) => {
+          const li = document.createElement("li");
+          li.textContent = t.id;
+          li.dataset.trackId = t.id;
+          li.dataset.status = t.status;
+          li.dataset.kind = t.kind;
+          return li;
+        }),
+      );
+    }
+    window.viewState = {
+      seq: model.seq,
+      time: model.time,
+      frames: model.frames,
+      selected: model.selected,
+      scale: view.scale,
+      offsetX: view.offsetX,
+      offsetY: view.offsetY,
+      tracks: screenTracks.slice(), // {id, kind, status, sx, sy}: CSS pixels in the canvas
+      detections: model.detections.length / 2,
+    };
+  }
+
+  let pending = false;
+  function requestRender() {
+    if (!pending) {
+      pending = true;
+      requestAnimationFrame(() => {
+        pending = false;
+        render();
+      });
+    }
+  }
+
+  // -- details of the clicked track -----------------------------------------------------------
+
+  function fmt(v, digits) {
+    return typeof v === "number" && Number.isFinite(v) ? v.toFixed(digits) : "–";
+  }
+
+  function findTrack(id) {
+    return model.confirmed.find((t) => t.id === id) || model.tentative.find((t) => t.id === id);
+  }
+
+  function showDetails() {
+    const box = el("details");
+    if (model.selected === null) {
+      box.hidden = true;
+      delete box.dataset.trackId;
+      return;
+    }
+    const t = findTrack(model.selected);
+    box.hidden = false;
+    box.dataset.trackId = model.selected;
+    el("details-id").textContent = model.selected;
+    const rows = [];
+    if (!t) {
+      box.dataset.status = "gone";
+      rows.push(["status", "no longer live"]);
+    } else {
+      box.dataset.status = t.status;
+      const speed = Math.hypot(t.velocity[0], t.velocity[1]);
+      rows.push(
+        ["status", t.status],
+        ["kind", t.kind],
+        ["position", `${fmt(t.position[0], 1)}, ${fmt(t.position[1], 1)} m`],
+        ["velocity", `${fmt(t.velocity[0], 1)}, ${fmt(t.velocity[1], 1)} m/s`],
+        ["speed", `${fmt(speed, 1)} m/s`],
+        ["score", fmt(t.score, 2)],
+        ["hits", String(t.hits)],
+      );
+      for (const [mode, p] of Object.entries(t.model_probabilities || {})) {
+        rows.push([`p(${mode})`, fmt(p, 3)]);
+      }
+    }
+    const dl = el("details-fields");
+    dl.replaceChildren(
+      ...rows.flatMap(([k, v]) => {
+        const dt = document.createElement("dt");
+        dt.textContent = k;
+        const dd = document.createElement("dd");
+        dd.textContent = v;
+        dd.dataset.field = k;
+        return [dt, dd];
+      }),
+    );
+  }
+
+  el("details-close").addEventListener("click", () => {
+    model.selected = null;
+    showDetails();
+    requestRender();
+  });
+
+  // -- frames from the service ----------------------------------------------------------------
+
+  function fit() {
+    const pts = [];
+    for (const t of model.confirmed.concat(model.tentative)) pts.push(t.position);
+    const d = model.detections;
+    for (let i = 0; i + 1 < d.length; i += 2) pts.push([d[i], d[i + 1]]);
+    if (pts.length === 0) return false;
+    let [xmin, ymin, xmax, ymax] = [Infinity, Infinity, -Infinity, -Infinity];
+    for (const [x, y] of pts) {
+      xmin = Math.min(xmin, x);
+      xmax = Math.max(xmax, x);
+      ymin = Math.min(ymin, y);
+      ymax = Math.max(ymax, y);
+    }
+    const w = canvas.clientWidth || 800;
+    const h = canvas.clientHeight || 600;
+    const span = Math.max(xmax - xmin, ymax - ymin, 100);
+    view.scale = (0.85 * Math.min(w, h)) / span;
+    view.offsetX = w / 2 - ((xmin + xmax) / 2) * view.scale;
+    view.offsetY = h / 2 + ((ymin + ymax) / 2) * view.scale;
+    return true;
+  }
+
+  function onFrame(frame) {
+    const report = frame.report;
+    model.frames += 1;
+    model.seq = report.seq;
+    model.time = report.time;
+    model.confirmed = report.tracks || [];
+    model.tentative = frame.tentative || [];
+    model.detections = frame.detections || [];
+    const live = new Set();
+    for (const t of model.confirmed.concat(model.tentative)) {
+      live.add(t.id);
+      let trail = model.trails.get(t.id);
+      if (!trail) model.trails.set(t.id, (trail = []));
+      const last = trail[trail.length - 1];
+      if (!last || last[0] !== t.position[0] || last[1] !== t.position[1]) {
+        trail.push([t.position[0], t.position[1]]);
+        if (trail.length > TRAIL_POINTS) trail.shift();
+      }
+    }
+    for (const id of model.trails.keys()) if (!live.has(id)) model.trails.delete(id);
+    if (!view.userMoved && model.frames <= 50) fit(); // until there is enough to frame
+    el("seq").textContent = String(report.seq);
+    el("time").textContent = report.time === null ? "–" : report.time.toFixed(2);
+    el("n-confirmed").textContent = String(model.confirmed.length);
+    el("n-tentative").textContent = String(model.tentative.length);
+    el("n-detections").textContent = String(model.detections.length / 2);
+    showDetails();
+    requestRender();
+  }
+
+  function connect() {
+    const status = el("status");
+    const source = new EventSource("/api/v1/stream");
+    source.addEventListener("report", (e) => {
+      status.textContent = "live";
+      status.dataset.state = "live";
+      onFrame(JSON.parse(e.data));
+    });
+    source.addEventListener("error", () => {
+      status.textContent = "reconnecting…";
+      status.dataset.state = "lost";
+    });
+  }
+
+  // -- pan (drag), zoom (wheel), select (click) -----------------------------------------------
+
+  let drag = null;
+
+  canvas.addEventListener("pointerdown", (e) => {
+    drag = { x: e.clientX, y: e.clientY, ox: view.offsetX, oy: view.offsetY, moved: false };
+    canvas.setPointerCapture(e.pointerId);
+  });
+
+  canvas.addEventListener("pointermove", (e) => {
+    if (!drag) return;
+    const dx = e.clientX - drag.x;
+    const dy = e.clientY - drag.y;
+    if (!drag.moved && Math.hypot(dx, dy) < DRAG_PIXELS) return;
+    drag.moved = true;
+    canvas.classList.add("dragging");
+    view.offsetX = drag.ox + dx;
+    view.offsetY = drag.oy + dy;
+    view.userMoved = true;
+    requestRender();
+  });
+
+  canvas.addEventListener("pointerup", (e) => {
+    if (!drag) return;
+    const wasClick = !drag.moved;
+    drag = null;
+    canvas.classList.remove("dragging");
+    if (wasClick) select(e);
+  });
+
+  canvas.addEventListener("pointercancel", () => {
+    drag = null;
+    canvas.classList.remove("dragging");
+  });
+
+  function select(e) {
+    const rect = canvas.getBoundingClientRect();
+    const px = e.clientX - rect.left;
+    const py = e.clientY - rect.top;
+    let best = null;
+    let bestDist = PICK_PIXELS;
+    for (const t of screenTracks) {
+      const dist = Math.hypot(t.sx - px, t.sy - py);
+      // a confirmed track wins over a tentative one at the same distance
+      if (dist < bestDist || (dist === bestDist && t.status === "confirmed")) {
+        best = t;
+        bestDist = dist;
+      }
+    }
+    model.selected = best ? best.id : null;
+    showDetails();
+    requestRender();
+  }
+
+  canvas.addEventListener(
+    "wheel",
+    (e) => {
+      e.preventDefault();
+      const rect = canvas.getBoundingClientRect();
+      const px = e.clientX - rect.left;
+      const py = e.clientY - rect.top;
+      const [wx, wy] = toWorld(px, py);
+      const factor = Math.exp(-e.deltaY * 0.0015);
+      view.scale = Math.min(1e3, Math.max(1e-6, view.scale * factor));
+      view.offsetX = px - wx * view.scale; // the point under the cursor stays put
+      view.offsetY = py + wy * view.scale;
+      view.userMoved = true;
+      requestRender();
+    },
+    { passive: false },
+  );
+
+  el("fit").addEventListener("click", () => {
+    view.userMoved = false;
+    fit();
+    requestRender();
+  });
+  el("show-tentative").addEventListener("change", requestRender);
+  el("show-detections").addEventListener("change", requestRender);
+  window.addEventListener("resize", requestRender);
+
+  render();
+  connect();
+})();
