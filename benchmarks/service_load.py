@@ -300,7 +300,7 @@ def main(argv: list[str] | None = None) -> int:
         if p.frames is not None:
             print(
                 f"   {p.name}: the viewer read {p.frames} frames; {p.frames_dropped} dropped "
-                "for it (replaced by newer ones; at most 25 frames/s are sent)"
+                "for it (replaced by newer ones; at most 10 frames/s are sent)"
             )
     print(
         "   service resident memory: "

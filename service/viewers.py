@@ -52,7 +52,21 @@ class Frame:
         return data
 
     def _build(self) -> bytes:
-        tentative = [t for t in self.state.all_tracks() if t["status"] != "confirmed"]
+        # Tentative tracks as the view draws them: no covariance, no detection ids.
+        tentative = [
+            {
+                "id": t.id,
+                "kind": t.kind,
+                "status": t.status,
+                "position": t.position,
+                "velocity": t.velocity,
+                "score": t.score,
+                "hits": t.hits,
+                "model_probabilities": t.model_probabilities,
+            }
+            for t in self.state.snapshots()
+            if t.status != "confirmed"
+        ]
         if self.positions is None or self.positions.size == 0:
             flat: Any = []
         else:

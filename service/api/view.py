@@ -28,7 +28,7 @@ __all__ = ["KEEPALIVE_SECONDS", "MAX_FRAMES_PER_SECOND", "VIEW_DIR", "router", "
 VIEW_DIR = Path(__file__).resolve().parent.parent / "view"
 
 #: At most this many frames a second to one viewer; newer frames replace unsent ones.
-MAX_FRAMES_PER_SECOND = 25.0
+MAX_FRAMES_PER_SECOND = 10.0
 
 #: A comment line after this many seconds without a frame, so a vanished viewer is noticed.
 KEEPALIVE_SECONDS = 10.0
