@@ -24,10 +24,7 @@ every hostile batch refused with one Error report, and the counters agreeing at 
 from __future__ import annotations
 
 import argparse
-import os
 import re
-import signal
-import subprocess
 import sys
 import threading
 import time
@@ -41,7 +38,8 @@ import numpy as np
 import orjson
 import zenoh
 
-from benchmarks.service_load import ROOT, free_port, rss_mb
+from benchmarks.service_load import rss_mb
+from benchmarks.service_process import running_service
 from clients.scenarios.multitarget import reference_scenario, simulate
 from service.keys import Keys, make_config
 
@@ -210,168 +208,128 @@ def main(argv: list[str] | None = None) -> int:
     )
     args = parser.parse_args(argv)
 
-    http_port, zenoh_port = free_port(), free_port()
-    endpoint = f"tcp/127.0.0.1:{zenoh_port}"
-    url = f"http://127.0.0.1:{http_port}"
-    service = subprocess.Popen(
-        [
-            sys.executable,
-            "-m",
-            "service",
-            "--http-port",
-            str(http_port),
-            "--zenoh-listen",
-            endpoint,
-            "--api-token",
-            "bench",
-            "--log-level",
-            "warning",
-        ],
-        cwd=ROOT,
-        env=dict(os.environ, PYTHONUNBUFFERED="1"),
-        stdout=subprocess.DEVNULL,
-        stderr=subprocess.PIPE,
-        text=True,
-    )
-    pid = service.pid
     cases: list[Case] = []
     hostile_errors: list[dict[str, Any]] = []
     errors_seen = threading.Condition()
-    try:
-        with httpx.Client(base_url=url, timeout=120) as http:
-            deadline = time.monotonic() + 30
-            while True:
-                try:
-                    if http.get("/health").status_code == 200:
-                        break
-                except httpx.TransportError:
-                    pass
-                if time.monotonic() > deadline or service.poll() is not None:
-                    raise RuntimeError("the service did not start")
-                time.sleep(0.1)
-            session = zenoh.open(make_config("peer", [], [endpoint]))
-            hostile_session = zenoh.open(make_config("peer", [], [endpoint]))
-            try:
-                other = OtherSensor(session, args.rate)
-
-                def on_tracks(sample: zenoh.Sample) -> None:
-                    other.on_report(orjson.loads(sample.payload.to_bytes()))
-
-                def on_error(sample: zenoh.Sample) -> None:
-                    report = orjson.loads(sample.payload.to_bytes())
-                    with errors_seen:
-                        if report["sensor_id"] == OTHER:
-                            other.errors.append(report)
-                        else:
-                            hostile_errors.append(report)
-                        errors_seen.notify_all()
-
-                subs = [
-                    session.declare_subscriber(KEYS.tracks, on_tracks),
-                    session.declare_subscriber(KEYS.all_errors, on_error),
-                ]
-                hostile_pub = hostile_session.declare_publisher(
-                    KEYS.detections(HOSTILE),
-                    encoding=zenoh.Encoding.APPLICATION_JSON,
-                    congestion_control=zenoh.CongestionControl.BLOCK,
-                    reliability=zenoh.Reliability.RELIABLE,
-                )
-                while not hostile_pub.matching_status.matching:
-                    time.sleep(0.01)
-                health = HealthProbe(url)
-                other.start()
-                health.start()
-                time.sleep(3.0)  # the other sensor's tracks start
-
-                def run_case(name: str, send: Callable[[int], str | None]) -> None:
-                    if cases and args.only not in name:
-                        return
-                    case = Case(name)
-                    time.sleep(1.0)
-                    hwm = reset_peak(pid)
-                    sampler = MemorySampler(pid)
-                    sampler.start()
-                    start = time.monotonic()
-                    for i in range(args.repeat):
-                        answer = send(i)
-                        if answer is not None:
-                            case.outcomes.append(answer)
-                    case.answer_s = time.monotonic() - start
-                    end = time.monotonic()
-                    time.sleep(1.0)  # the reports of the batches put during the case
-                    sampler.stop.set()
-                    sampler.join()
-                    case.peak_mb = _status_mb(pid, "VmHWM") if hwm else sampler.peak
-                    case.after_mb = rss_mb(pid)
-                    case.waits_ms = other.between(start, end + 0.2)
-                    case.health_ms = health.between(start, end + 0.2)
-                    cases.append(case)
-                    print(f"   ... {name}: {case.outcomes}", file=sys.stderr, flush=True)
-
-                def over_zenoh(payload_of: Callable[[int], bytes]) -> Callable[[int], str]:
-                    def send(i: int) -> str:
-                        payload = payload_of(i)
-                        with errors_seen:
-                            n = len(hostile_errors)
-                        hostile_pub.put(payload)
-                        with errors_seen:
-                            if not errors_seen.wait_for(lambda: len(hostile_errors) > n, 120):
-                                return "no answer"
-                            return str(hostile_errors[n]["error"])
-
-                    return send
-
-                def over_rest(payload_of: Callable[[int], bytes]) -> Callable[[int], str]:
-                    def send(i: int) -> str:
-                        try:
-                            r = http.post("/api/v1/detections", content=payload_of(i))
-                        except httpx.HTTPError as exc:
-                            return f"{type(exc).__name__}"
-                        return f"{r.status_code} {r.json().get('error', '')}".strip()
-
-                    return send
-
-                run_case("no hostile sender", lambda i: None)
-                for n in args.sizes:
-                    payload = small_detections(n, 1.0)
-                    mb = len(payload) / 1e6
-                    run_case(f"Zenoh {n:,} ({mb:.0f} MB)", over_zenoh(lambda i, p=payload: p))
-                    run_case(f"REST  {n:,} ({mb:.0f} MB)", over_rest(lambda i, p=payload: p))
-                    del payload
-                limit = 10_000
-                full = [full_detections(limit, 1.0 + i) for i in range(args.repeat)]
-                mb = len(full[0]) / 1e6
-                run_case(
-                    f"Zenoh {limit:,} full, last bad ({mb:.1f} MB)",
-                    over_zenoh(lambda i: full[i]),
-                )
-                run_case(
-                    f"REST  {limit:,} full, last bad ({mb:.1f} MB)",
-                    over_rest(lambda i: full[i]),
-                )
-                many = small_detections(220_000, 1.0)
-                mb = len(many) / 1e6
-                run_case(f"Zenoh 220,000 small ({mb:.1f} MB)", over_zenoh(lambda i: many))
-                run_case(f"REST  220,000 small ({mb:.1f} MB)", over_rest(lambda i: many))
-
-                other.stop.set()
-                health.stop.set()
-                other.join(5)
-                health.join(5)
-                time.sleep(0.5)
-                for sub in subs:
-                    sub.undeclare()
-                hostile_pub.undeclare()
-            finally:
-                session.close()
-                hostile_session.close()
-            stats = http.get("/api/v1/stats").json()
-    finally:
-        service.send_signal(signal.SIGTERM)
+    with running_service() as service, httpx.Client(base_url=service.url, timeout=120) as http:
+        endpoint, url, pid = service.endpoint, service.url, service.pid
+        session = zenoh.open(make_config("peer", [], [endpoint]))
+        hostile_session = zenoh.open(make_config("peer", [], [endpoint]))
         try:
-            service.wait(10)
-        except subprocess.TimeoutExpired:
-            service.kill()
+            other = OtherSensor(session, args.rate)
+
+            def on_tracks(sample: zenoh.Sample) -> None:
+                other.on_report(orjson.loads(sample.payload.to_bytes()))
+
+            def on_error(sample: zenoh.Sample) -> None:
+                report = orjson.loads(sample.payload.to_bytes())
+                with errors_seen:
+                    if report["sensor_id"] == OTHER:
+                        other.errors.append(report)
+                    else:
+                        hostile_errors.append(report)
+                    errors_seen.notify_all()
+
+            subs = [
+                session.declare_subscriber(KEYS.tracks, on_tracks),
+                session.declare_subscriber(KEYS.all_errors, on_error),
+            ]
+            hostile_pub = hostile_session.declare_publisher(
+                KEYS.detections(HOSTILE),
+                encoding=zenoh.Encoding.APPLICATION_JSON,
+                congestion_control=zenoh.CongestionControl.BLOCK,
+                reliability=zenoh.Reliability.RELIABLE,
+            )
+            while not hostile_pub.matching_status.matching:
+                time.sleep(0.01)
+            health = HealthProbe(url)
+            other.start()
+            health.start()
+            time.sleep(3.0)  # the other sensor's tracks start
+
+            def run_case(name: str, send: Callable[[int], str | None]) -> None:
+                if cases and args.only not in name:
+                    return
+                case = Case(name)
+                time.sleep(1.0)
+                hwm = reset_peak(pid)
+                sampler = MemorySampler(pid)
+                sampler.start()
+                start = time.monotonic()
+                for i in range(args.repeat):
+                    answer = send(i)
+                    if answer is not None:
+                        case.outcomes.append(answer)
+                case.answer_s = time.monotonic() - start
+                end = time.monotonic()
+                time.sleep(1.0)  # the reports of the batches put during the case
+                sampler.stop.set()
+                sampler.join()
+                case.peak_mb = _status_mb(pid, "VmHWM") if hwm else sampler.peak
+                case.after_mb = rss_mb(pid)
+                case.waits_ms = other.between(start, end + 0.2)
+                case.health_ms = health.between(start, end + 0.2)
+                cases.append(case)
+                print(f"   ... {name}: {case.outcomes}", file=sys.stderr, flush=True)
+
+            def over_zenoh(payload_of: Callable[[int], bytes]) -> Callable[[int], str]:
+                def send(i: int) -> str:
+                    payload = payload_of(i)
+                    with errors_seen:
+                        n = len(hostile_errors)
+                    hostile_pub.put(payload)
+                    with errors_seen:
+                        if not errors_seen.wait_for(lambda: len(hostile_errors) > n, 120):
+                            return "no answer"
+                        return str(hostile_errors[n]["error"])
+
+                return send
+
+            def over_rest(payload_of: Callable[[int], bytes]) -> Callable[[int], str]:
+                def send(i: int) -> str:
+                    try:
+                        r = http.post("/api/v1/detections", content=payload_of(i))
+                    except httpx.HTTPError as exc:
+                        return f"{type(exc).__name__}"
+                    return f"{r.status_code} {r.json().get('error', '')}".strip()
+
+                return send
+
+            run_case("no hostile sender", lambda i: None)
+            for n in args.sizes:
+                payload = small_detections(n, 1.0)
+                mb = len(payload) / 1e6
+                run_case(f"Zenoh {n:,} ({mb:.0f} MB)", over_zenoh(lambda i, p=payload: p))
+                run_case(f"REST  {n:,} ({mb:.0f} MB)", over_rest(lambda i, p=payload: p))
+                del payload
+            limit = 10_000
+            full = [full_detections(limit, 1.0 + i) for i in range(args.repeat)]
+            mb = len(full[0]) / 1e6
+            run_case(
+                f"Zenoh {limit:,} full, last bad ({mb:.1f} MB)",
+                over_zenoh(lambda i: full[i]),
+            )
+            run_case(
+                f"REST  {limit:,} full, last bad ({mb:.1f} MB)",
+                over_rest(lambda i: full[i]),
+            )
+            many = small_detections(220_000, 1.0)
+            mb = len(many) / 1e6
+            run_case(f"Zenoh 220,000 small ({mb:.1f} MB)", over_zenoh(lambda i: many))
+            run_case(f"REST  220,000 small ({mb:.1f} MB)", over_rest(lambda i: many))
+
+            other.stop.set()
+            health.stop.set()
+            other.join(5)
+            health.join(5)
+            time.sleep(0.5)
+            for sub in subs:
+                sub.undeclare()
+            hostile_pub.undeclare()
+        finally:
+            session.close()
+            hostile_session.close()
+        stats = http.get("/api/v1/stats").json()
 
     print("== hostile senders: the service with its default limits (max_batch_bytes 4 MiB,")
     print(f"   10,000 detections a batch); another sensor publishes {args.rate:g} batches/s of")

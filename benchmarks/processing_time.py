@@ -20,22 +20,18 @@ difference is threads, the GIL, thread pools or what idling costs the CPU's cach
 from __future__ import annotations
 
 import argparse
-import os
 import statistics
 import subprocess
 import sys
 import time
-from pathlib import Path
 
 import httpx
 import numpy as np
 
-from benchmarks.service_load import free_port
+from benchmarks.service_process import ROOT, running_service
 from clients.scenarios.multitarget import reference_scenario, simulate
 from trackers.config import TrackerConfig
 from trackers.pipeline import TrackingPipeline
-
-ROOT = Path(__file__).resolve().parent.parent
 
 
 def in_process(seed: int, gap: float) -> list[float]:
@@ -54,43 +50,19 @@ def in_process(seed: int, gap: float) -> list[float]:
 
 def in_service(seed: int, speed: float) -> dict[str, float]:
     """The service's processing-time percentiles for the scenario published at ``speed``."""
-    http_port, zenoh_port = free_port(), free_port()
-    endpoint = f"tcp/127.0.0.1:{zenoh_port}"
-    service = subprocess.Popen(
-        [
-            *(sys.executable, "-m", "service", "--http-port", str(http_port)),
-            *("--zenoh-listen", endpoint, "--log-level", "warning"),
-        ],
-        cwd=ROOT,
-        env=dict(os.environ, PYTHONUNBUFFERED="1", TRACKER_API_TOKEN="bench"),
-        stdout=subprocess.DEVNULL,
-    )
-    url = f"http://127.0.0.1:{http_port}"
-    try:
-        deadline = time.monotonic() + 30
-        while True:
-            try:
-                if httpx.get(f"{url}/health", timeout=1).status_code == 200:
-                    break
-            except httpx.HTTPError:
-                pass
-            if time.monotonic() > deadline or service.poll() is not None:
-                raise RuntimeError("the service did not start")
-            time.sleep(0.1)
+    with running_service() as service:
         subprocess.run(
             [
                 *(sys.executable, "-m", "clients.publish", "--scenario", "reference"),
                 *("--seed", str(seed), "--rate", "realtime", "--speed", str(speed)),
-                *("-q", "-e", endpoint),
+                *("-q", "-e", service.endpoint),
             ],
             cwd=ROOT,
             check=True,
             stdout=subprocess.DEVNULL,
         )
-        return dict(httpx.get(f"{url}/api/v1/stats", timeout=5).json()["processing_ms"])
-    finally:
-        service.terminate()
-        service.wait(10)
+        stats = httpx.get(f"{service.url}/api/v1/stats", timeout=5).json()
+    return dict(stats["processing_ms"])
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -22,28 +22,23 @@ from __future__ import annotations
 
 import argparse
 import math
-import os
 import re
-import signal
-import socket
 import subprocess
 import sys
 import threading
 import time
-from contextlib import closing
 from dataclasses import dataclass
 from pathlib import Path
 
 import httpx
 import numpy as np
 
-ROOT = Path(__file__).resolve().parent.parent
+from benchmarks.service_process import ROOT, running_service
 
-
-def free_port() -> int:
-    with closing(socket.socket(socket.AF_INET, socket.SOCK_STREAM)) as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
+#: Seconds of scenario time between one phase's last batch and the next phase's first: within
+#: the service's time-jump allowance (``ingest.max_time_jump``, 10 s) whatever the wall time
+#: between the phases.
+PHASE_GAP = 2.0
 
 
 @dataclass
@@ -214,69 +209,29 @@ def main(argv: list[str] | None = None) -> int:
     if args.rounds < 1:
         parser.error("--rounds: at least 1")
 
-    http_port, zenoh_port = free_port(), free_port()
-    endpoint = f"tcp/127.0.0.1:{zenoh_port}"
-    env = dict(os.environ, PYTHONUNBUFFERED="1")
-    service = subprocess.Popen(
-        [
-            sys.executable,
-            "-m",
-            "service",
-            "--http-port",
-            str(http_port),
-            "--zenoh-listen",
-            endpoint,
-            "--api-token",
-            "bench",
-            "--log-level",
-            "warning",
-        ],
-        cwd=ROOT,
-        env=env,
-        stdout=subprocess.DEVNULL,
-        stderr=subprocess.PIPE,
-        text=True,
-    )
-    try:
-        with httpx.Client(base_url=f"http://127.0.0.1:{http_port}", timeout=5.0) as client:
-            deadline = time.monotonic() + 30
-            while True:
-                try:
-                    if client.get("/health").status_code == 200:
-                        break
-                except httpx.TransportError:
-                    pass
-                if time.monotonic() > deadline or service.poll() is not None:
-                    raise RuntimeError("the service did not start")
-                time.sleep(0.1)
-            scans = int(args.rate * args.seconds)
-            rss = [("started", rss_mb(service.pid))]
-            phases = [
-                run_phase(f"paced {args.rate:.0f}/s", client, endpoint, scans, args.rate, 0.0)
-            ]
-            rss.append((phases[-1].name, rss_mb(service.pid)))
-            for k in range(1, args.rounds + 1):
-                name = "max rate" if args.rounds == 1 else f"max rate {k}"
-                offset = k * (float(scans) + 10.0)
-                phases.append(run_phase(name, client, endpoint, scans, None, offset))
-                rss.append((name, rss_mb(service.pid)))
-            if not args.no_viewer:  # the same two phases with a browser's stream open
-                offset = (args.rounds + 1) * (float(scans) + 10.0)
-                name = "paced+viewer"
-                phases.append(
-                    run_phase(name, client, endpoint, scans, args.rate, offset, viewer=True)
-                )
-                rss.append((name, rss_mb(service.pid)))
-                offset += float(scans) + 10.0
-                name = "max+viewer"
-                phases.append(run_phase(name, client, endpoint, scans, None, offset, viewer=True))
-                rss.append((name, rss_mb(service.pid)))
-    finally:
-        service.send_signal(signal.SIGTERM)
-        try:
-            service.wait(10)
-        except subprocess.TimeoutExpired:
-            service.kill()
+    with (
+        running_service() as service,
+        httpx.Client(base_url=service.url, timeout=5.0) as client,
+    ):
+        endpoint = service.endpoint
+        scans = int(args.rate * args.seconds)
+        rss = [("started", rss_mb(service.pid))]
+        phases = [run_phase(f"paced {args.rate:.0f}/s", client, endpoint, scans, args.rate, 0.0)]
+        rss.append((phases[-1].name, rss_mb(service.pid)))
+        for k in range(1, args.rounds + 1):
+            name = "max rate" if args.rounds == 1 else f"max rate {k}"
+            offset = k * (float(scans) + PHASE_GAP)
+            phases.append(run_phase(name, client, endpoint, scans, None, offset))
+            rss.append((name, rss_mb(service.pid)))
+        if not args.no_viewer:  # the same two phases with a browser's stream open
+            offset = (args.rounds + 1) * (float(scans) + PHASE_GAP)
+            name = "paced+viewer"
+            phases.append(run_phase(name, client, endpoint, scans, args.rate, offset, viewer=True))
+            rss.append((name, rss_mb(service.pid)))
+            offset += float(scans) + PHASE_GAP
+            name = "max+viewer"
+            phases.append(run_phase(name, client, endpoint, scans, None, offset, viewer=True))
+            rss.append((name, rss_mb(service.pid)))
 
     decode_ms, n_det = ingest_cost()
     print(

@@ -105,6 +105,7 @@ class Demo:
         self.query_timeout = query_timeout
         self.parent = parent
         self._stop = stop
+        self._next_summary = 0.0  # wall time of the next one-line summary
 
     @property
     def published(self) -> int:
@@ -123,20 +124,9 @@ class Demo:
         last = None if report is None else report.get("time")
         offset = 0.0 if last is None else float(last) + scenario.dt
         start_wall = time.monotonic()
-        next_summary = start_wall + self.summary_interval
+        self._next_summary = start_wall + self.summary_interval
         for scan in scenario.scans():
-            due = start_wall + scan.time / self.speed
-            while True:
-                now = time.monotonic()
-                if now >= next_summary:
-                    self._log_summary()
-                    next_summary = time.monotonic() + self.summary_interval
-                    continue
-                if now >= due:
-                    break
-                if self._wait(min(due, next_summary) - now):
-                    return
-            if self._stopped():
+            if self._pace(start_wall + scan.time / self.speed):
                 return
             batch = scan.to_batch()
             batch["time"] = scan.time + offset
@@ -149,7 +139,7 @@ class Demo:
         first = scans[0].time
         duration = scans[-1].time - first
         dt = scans[1].time - scans[0].time if len(scans) > 1 else 1.0
-        next_summary = time.monotonic() + self.summary_interval
+        self._next_summary = time.monotonic() + self.summary_interval
         loop = 0
         while not self._stopped():
             offset = loop * (duration + dt)
@@ -159,17 +149,8 @@ class Demo:
                 offset = last + dt - first
             start_wall = time.monotonic()
             for scan in scans:
-                due = start_wall + (scan.time - first) / self.speed
-                while True:
-                    now = time.monotonic()
-                    if now >= next_summary:
-                        self._log_summary()
-                        next_summary = time.monotonic() + self.summary_interval
-                        continue
-                    if now >= due:
-                        break
-                    if self._wait(min(due, next_summary) - now):
-                        return
+                if self._pace(start_wall + (scan.time - first) / self.speed):
+                    return
                 batch = scan.to_batch()
                 batch["time"] = scan.time + offset
                 self.publisher.put(batch)
@@ -189,6 +170,20 @@ class Demo:
         if self.parent is not None and os.getppid() != self.parent:
             self._stop.set()  # the service that started us is gone
         return self._stop.is_set()
+
+    def _pace(self, due: float) -> bool:
+        """Wait until the wall time ``due``, logging the summaries that fall due meanwhile;
+        True to stop."""
+        while True:
+            now = time.monotonic()
+            if now >= self._next_summary:
+                self._log_summary()
+                self._next_summary = time.monotonic() + self.summary_interval
+                continue
+            if now >= due:
+                return self._stopped()
+            if self._wait(min(due, self._next_summary) - now):
+                return True
 
     def _wait(self, seconds: float) -> bool:
         """Wait up to ``seconds`` (half a second at most, to watch the parent); True to stop."""

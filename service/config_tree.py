@@ -140,25 +140,11 @@ def _patch_model(model: type[BaseModel], name: str) -> type[BaseModel]:
 ConfigPatch = _patch_model(ConfigDocument, "ConfigPatch")
 
 
-def _built(cls: type, values: dict[str, Any]) -> Any:
-    hints = get_type_hints(cls)
-    kwargs: dict[str, Any] = {}
-    for f in dataclasses.fields(cls):
-        value = values[f.name]
-        if dataclasses.is_dataclass(hints[f.name]):
-            value = _built(hints[f.name], value)  # type: ignore[arg-type]
-        elif isinstance(value, list):
-            value = tuple(value)
-        kwargs[f.name] = value
-    return cls(**kwargs)
-
-
 def to_tracker_config(doc: BaseModel) -> TrackerConfig:
     """The tracker's configuration from a validated document; its range checks raise
     :class:`ConfigError` naming the field."""
-    values = doc.model_dump(exclude={"ingest"})
     try:
-        return _built(TrackerConfig, values)  # type: ignore[no-any-return]
+        return TrackerConfig.from_dict(doc.model_dump(exclude={"ingest"}))
     except ValueError as exc:
         raise ConfigError(str(exc)) from None
 

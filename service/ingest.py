@@ -12,6 +12,7 @@ from a payload that failed validation (:func:`peek`, which reads at most a bound
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import heapq
 import itertools
@@ -26,7 +27,7 @@ from collections.abc import Callable, Iterator
 from concurrent.futures import Future
 from dataclasses import dataclass, field
 from itertools import pairwise
-from typing import Any
+from typing import Any, TypeVar
 
 import orjson
 
@@ -164,6 +165,24 @@ def time_jump_detail(
 REVISIT_FACTOR = 2.0
 
 
+_V = TypeVar("_V")
+
+
+def _recently_seen(
+    by_sensor: OrderedDict[str, _V], sensor_id: str, make: Callable[[], _V], most: int
+) -> _V:
+    """``sensor_id``'s entry of a per-sensor memory, made by ``make`` if it has none, now the
+    most recently seen; beyond ``most`` sensors the least recently seen is forgotten."""
+    entry = by_sensor.get(sensor_id)
+    if entry is None:
+        entry = by_sensor[sensor_id] = make()
+        if len(by_sensor) > most:
+            by_sensor.popitem(last=False)
+    else:
+        by_sensor.move_to_end(sensor_id)
+    return entry
+
+
 class SensorClocks:
     """Each sensor's usual interval between batches: the median of the gaps between the times
     of its last ``gaps + 1`` accepted batches, for the last ``sensors`` sensors seen (least
@@ -175,14 +194,8 @@ class SensorClocks:
         self._times: OrderedDict[str, deque[float]] = OrderedDict()
 
     def accepted(self, sensor_id: str, time: float) -> None:
-        times = self._times.get(sensor_id)
-        if times is None:
-            times = self._times[sensor_id] = deque(maxlen=self.gaps + 1)
-            if len(self._times) > self.sensors:
-                self._times.popitem(last=False)
-        else:
-            self._times.move_to_end(sensor_id)
-        times.append(time)
+        make = functools.partial(deque, maxlen=self.gaps + 1)
+        _recently_seen(self._times, sensor_id, make, self.sensors).append(time)
 
     def revisit(self, sensor_id: str) -> float:
         """The sensor's usual interval between batches (s), 0 before its second batch."""
@@ -266,13 +279,7 @@ class RecentBatches:
         return recent is not None and digest in recent
 
     def add(self, sensor_id: str, digest: bytes) -> None:
-        recent = self._by_sensor.get(sensor_id)
-        if recent is None:
-            recent = self._by_sensor[sensor_id] = OrderedDict()
-            if len(self._by_sensor) > self.sensors:
-                self._by_sensor.popitem(last=False)
-        else:
-            self._by_sensor.move_to_end(sensor_id)
+        recent = _recently_seen(self._by_sensor, sensor_id, OrderedDict, self.sensors)
         recent[digest] = None
         if len(recent) > self.per_sensor:
             recent.popitem(last=False)

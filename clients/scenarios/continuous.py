@@ -24,7 +24,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from clients.scenarios.multitarget import Area, SimulatedScan, move_targets, ncv_noise
+from clients.scenarios.multitarget import (
+    Area,
+    SimulatedScan,
+    draw_turn_rates,
+    move_targets,
+    ncv_noise,
+)
 
 __all__ = ["SPEED_CLASSES", "ContinuousScenario"]
 
@@ -121,8 +127,7 @@ class ContinuousScenario:
         return np.hstack([position, velocity])
 
     def _turn_rates(self, rng: np.random.Generator, count: int) -> np.ndarray:
-        straight = rng.random(count) < 0.5
-        return np.where(straight, 0.0, self.turn_rate_std * rng.standard_normal(count))
+        return draw_turn_rates(rng, self.turn_rate_std, count)
 
     def _scan(
         self, rng: np.random.Generator, k: int, t: float, ids: np.ndarray, states: np.ndarray

@@ -56,6 +56,7 @@ __all__ = [
     "SensorSpec",
     "SimulatedScan",
     "crossing_scenario",
+    "draw_turn_rates",
     "move_targets",
     "ncv_noise",
     "reference_scenario",
@@ -248,7 +249,7 @@ def _draw_targets(rng: np.random.Generator, config: ScenarioConfig, count: int) 
     return np.hstack([position, velocity])
 
 
-def _draw_turn_rates(rng: np.random.Generator, std: float, count: int) -> np.ndarray:
+def draw_turn_rates(rng: np.random.Generator, std: float, count: int) -> np.ndarray:
     """``count`` turn rates: 0 with probability 1/2, else N(0, std²)."""
     straight = rng.random(count) < 0.5
     return np.where(straight, 0.0, std * rng.standard_normal(count))
@@ -310,7 +311,7 @@ def simulate(config: ScenarioConfig) -> list[SimulatedScan]:
         states = _draw_targets(rng, config, config.n_targets)
     ids = np.arange(states.shape[0])
     next_id = states.shape[0]
-    omega = _draw_turn_rates(rng, config.turn_rate_std, ids.size) if turning else None
+    omega = draw_turn_rates(rng, config.turn_rate_std, ids.size) if turning else None
 
     area = config.area
     area_size = (area[0][1] - area[0][0]) * (area[1][1] - area[1][0])
@@ -326,7 +327,7 @@ def simulate(config: ScenarioConfig) -> list[SimulatedScan]:
                 omega = None if omega is None else omega[alive]
             if omega is not None:
                 switch = rng.random(ids.size) < -math.expm1(-T / TURN_SEGMENT_MEAN)
-                new = _draw_turn_rates(rng, config.turn_rate_std, ids.size)
+                new = draw_turn_rates(rng, config.turn_rate_std, ids.size)
                 omega = np.where(switch, new, omega)
             states = move_targets(states, omega, T) + ncv_noise(rng, config.q, T, ids.size)
             if config.birth_death:
@@ -336,7 +337,7 @@ def simulate(config: ScenarioConfig) -> list[SimulatedScan]:
                     ids = np.concatenate([ids, np.arange(next_id, next_id + born)])
                     next_id += born
                     if omega is not None:
-                        rates = _draw_turn_rates(rng, config.turn_rate_std, born)
+                        rates = draw_turn_rates(rng, config.turn_rate_std, born)
                         omega = np.concatenate([omega, rates])
             now = t
 
