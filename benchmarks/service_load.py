@@ -14,7 +14,9 @@ and dropped (from ``/api/v1/stats``), the processing rate, the tracker's time pe
 the REST latency percentiles, against the targets (≥ 200 batches/s, nothing lost, p99 < 20 ms);
 then the service's resident memory after each phase. Then the paced and max-rate phases again
 with a live viewer connected (a thread reading ``GET /api/v1/stream`` as a browser would),
-printing the frames it got and those dropped for it (unless ``--no-viewer``). Exits 1 when a
+printing the frames it got and those dropped for it (unless ``--no-viewer``), and what one
+frame costs to build, timed in process. Each phase also prints the service process's CPU
+time (all threads) per processed batch, read from ``/proc``. Exits 1 when a
 target is missed.
 """
 
@@ -22,6 +24,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import os
 import re
 import subprocess
 import sys
@@ -53,6 +56,7 @@ class Phase:
     tracker_p50: float
     tracker_p99: float
     get_ms: np.ndarray
+    cpu_ms_per_batch: float = float("nan")  # the service process's CPU time (all threads)
     frames: int | None = None  # live view frames read, when a viewer was connected
     frames_dropped: int | None = None
 
@@ -89,6 +93,7 @@ def run_phase(
     rate: float | None,
     offset: float,
     viewer: bool = False,
+    pid: int | None = None,
 ) -> Phase:
     frames = [0]
     stop_viewer = threading.Event()
@@ -104,6 +109,7 @@ def run_phase(
                 raise RuntimeError("the viewer did not connect")
             time.sleep(0.05)
     s0 = client.get("/api/v1/stats").json()
+    cpu0 = cpu_seconds(pid) if pid else float("nan")
     cmd = [
         sys.executable,
         "-m",
@@ -133,6 +139,7 @@ def run_phase(
         raise RuntimeError(f"unexpected publisher output: {pub.stdout!r}")
     elapsed_pub = float(m.group(2))
     s1 = client.get("/api/v1/stats").json()
+    cpu1 = cpu_seconds(pid) if pid else float("nan")
     processed = s1["batches_processed"] - s0["batches_processed"]
     sampler.join(1.0)
     if reader is not None:
@@ -151,6 +158,7 @@ def run_phase(
         tracker_p50=s1["processing_ms"]["p50"],
         tracker_p99=s1["processing_ms"]["p99"],
         get_ms=np.asarray(latencies),
+        cpu_ms_per_batch=1e3 * (cpu1 - cpu0) / max(processed, 1),
         frames=frames[0] if viewer else None,
         frames_dropped=(s1["view_frames_dropped"] - s0["view_frames_dropped"] if viewer else None),
     )
@@ -164,6 +172,42 @@ def rss_mb(pid: int) -> float:
         return float("nan")
     m = re.search(r"^VmRSS:\s+(\d+) kB", status, re.MULTILINE)
     return int(m.group(1)) / 1024 if m else float("nan")
+
+
+def cpu_seconds(pid: int) -> float:
+    """User plus system CPU seconds used so far by process ``pid``, all its threads (Linux
+    ``/proc``; NaN elsewhere)."""
+    try:
+        stat = Path(f"/proc/{pid}/stat").read_text()
+    except OSError:
+        return float("nan")
+    fields = stat[stat.rindex(")") + 2 :].split()  # after "pid (comm) "
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
+def frame_cost(repeats: int = 200) -> tuple[float, int, int]:
+    """Median milliseconds to build one live-view frame in process (what the service does at
+    most 10 times a second while a viewer is connected, off the tracker's worker), from the
+    reference scenario's tracker state after 50 scans; and its track and detection counts."""
+    from clients.scenarios.multitarget import reference_scenario, simulate
+    from service.convert import report_dict, track_to_dict
+    from service.reports import ReportState
+    from service.viewers import Frame
+    from trackers.config import TrackerConfig
+    from trackers.pipeline import TrackingPipeline
+
+    pipeline = TrackingPipeline(TrackerConfig())
+    scans = simulate(reference_scenario(0))[:50]
+    for scan in scans:
+        result = pipeline.process(scan.to_scan())
+    confirmed = [track_to_dict(t) for t in result.confirmed()]
+    state = ReportState.of(report_dict(1, result, 1.0, confirmed), result)
+    times = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        Frame(state, scans[-1].z).data  # noqa: B018 - building the bytes is what is timed
+        times.append(time.perf_counter() - t0)
+    return 1e3 * float(np.median(times)), len(result.tracks), len(scans[-1].z)
 
 
 def ingest_cost(repeats: int = 2000) -> tuple[float, int]:
@@ -216,21 +260,31 @@ def main(argv: list[str] | None = None) -> int:
         endpoint = service.endpoint
         scans = int(args.rate * args.seconds)
         rss = [("started", rss_mb(service.pid))]
-        phases = [run_phase(f"paced {args.rate:.0f}/s", client, endpoint, scans, args.rate, 0.0)]
+        phases = [
+            run_phase(
+                f"paced {args.rate:.0f}/s", client, endpoint, scans, args.rate, 0.0, pid=service.pid
+            )
+        ]
         rss.append((phases[-1].name, rss_mb(service.pid)))
         for k in range(1, args.rounds + 1):
             name = "max rate" if args.rounds == 1 else f"max rate {k}"
             offset = k * (float(scans) + PHASE_GAP)
-            phases.append(run_phase(name, client, endpoint, scans, None, offset))
+            phases.append(run_phase(name, client, endpoint, scans, None, offset, pid=service.pid))
             rss.append((name, rss_mb(service.pid)))
         if not args.no_viewer:  # the same two phases with a browser's stream open
             offset = (args.rounds + 1) * (float(scans) + PHASE_GAP)
             name = "paced+viewer"
-            phases.append(run_phase(name, client, endpoint, scans, args.rate, offset, viewer=True))
+            phases.append(
+                run_phase(
+                    name, client, endpoint, scans, args.rate, offset, viewer=True, pid=service.pid
+                )
+            )
             rss.append((name, rss_mb(service.pid)))
             offset += float(scans) + PHASE_GAP
             name = "max+viewer"
-            phases.append(run_phase(name, client, endpoint, scans, None, offset, viewer=True))
+            phases.append(
+                run_phase(name, client, endpoint, scans, None, offset, viewer=True, pid=service.pid)
+            )
             rss.append((name, rss_mb(service.pid)))
 
     decode_ms, n_det = ingest_cost()
@@ -242,14 +296,23 @@ def main(argv: list[str] | None = None) -> int:
     print("   GET /api/v1/tracks ~100/s from a third; service, publisher and reader share 2 cores")
     print(
         f"   {'phase':<13}{'published':>10}{'processed':>10}{'rejected':>9}{'dropped':>8}"
-        f"{'batches/s':>10}{'tracker p50/p99 ms':>20}{'GET p50/p99/max ms':>22}"
+        f"{'batches/s':>10}{'tracker p50/p99 ms':>20}{'CPU ms/batch':>13}"
+        f"{'GET p50/p99/max ms':>22}"
     )
     for p in phases:
         g = p.get_ms
         print(
             f"   {p.name:<13}{p.published:>10}{p.processed:>10}{p.rejected:>9}{p.dropped:>8}"
             f"{p.rate:>10.1f}{p.tracker_p50:>11.2f}/{p.tracker_p99:<8.2f}"
+            f"{p.cpu_ms_per_batch:>13.2f}"
             f"{np.percentile(g, 50):>9.2f}/{np.percentile(g, 99):.2f}/{g.max():.1f}"
+        )
+    if not args.no_viewer:
+        frame_ms, n_tracks, n_det = frame_cost()
+        print(
+            f"   a live-view frame ({n_tracks} tracks, {n_det} detections) costs {frame_ms:.3f} ms "
+            f"to build, once for every viewer, off the tracker's worker: at 10 frames/s "
+            f"{100 * frame_ms * 10 / 1000:.3f} % of one core"
         )
     for p in phases:
         if p.frames is not None:

@@ -9,11 +9,14 @@ Publishes a scenario's batches over Zenoh in real time, as a sensor would, its t
 starting after the service's latest report so they never go out of sequence: by default the
 continuous scenario (:mod:`clients.scenarios.continuous`: targets born at random times, each
 living a random while, so tracks end and start one by one as in life; one radar at 1 s,
-Pd 0.9, clutter), or with ``--scenario reference`` the 100 s reference scenario in a loop.
+Pd 0.9, clutter), or with ``--scenario reference`` the 100 s reference scenario in a loop,
+or with ``--scenario convoy`` / ``--scenario harbour`` one of the extended-object scenarios of
+:mod:`clients.scenarios.extended` in a loop (a convoy in traffic, 600 s at 5 s scans; a boat
+entering a harbour, 300 s at 2 s scans). A loop's times follow on from the previous loop's.
 Every ``--summary-interval`` seconds it asks the service's
 queryable ``{prefix}/state/tracks`` for the latest Track report and logs a one-line summary
-of the confirmed tracks. ``tracker-service --demo`` starts it as a child process connected to
-the service and stops it on shutdown. Runs until SIGINT or SIGTERM.
+of the confirmed tracks. ``tracker-service --demo [SCENARIO]`` starts it as a child process
+connected to the service and stops it on shutdown. Runs until SIGINT or SIGTERM.
 """
 
 from __future__ import annotations
@@ -33,7 +36,7 @@ import orjson
 import zenoh
 
 from clients.scenarios.continuous import ContinuousScenario
-from clients.scenarios.multitarget import reference_scenario, simulate
+from clients.scenarios.multitarget import SimulatedScan, reference_scenario, simulate
 from clients.zenoh_session import (
     DEFAULT_ENDPOINT,
     BatchPublisher,
@@ -42,7 +45,15 @@ from clients.zenoh_session import (
 )
 from service.keys import Keys
 
-__all__ = ["SCENARIOS", "Demo", "build_parser", "latest_report", "main", "summary_line"]
+__all__ = [
+    "SCENARIOS",
+    "Demo",
+    "build_parser",
+    "latest_report",
+    "looped_scans",
+    "main",
+    "summary_line",
+]
 
 log = logging.getLogger("clients.demo")
 
@@ -71,8 +82,25 @@ def latest_report(session: zenoh.Session, keys: Keys, timeout: float) -> dict[st
 
 
 #: ``continuous``: targets come and go forever (:mod:`clients.scenarios.continuous`);
-#: ``reference``: the 100 s reference scenario replayed in a loop.
-SCENARIOS = ("continuous", "reference")
+#: ``reference``: the 100 s reference scenario replayed in a loop; ``convoy`` and
+#: ``harbour``: the extended-object scenarios (:mod:`clients.scenarios.extended`) in a loop.
+SCENARIOS = ("continuous", "reference", "convoy", "harbour")
+
+
+def looped_scans(scenario: str, seed: int = 0) -> list[SimulatedScan]:
+    """The scans a looping scenario replays (every one but ``continuous``), in time order."""
+    if scenario == "reference":
+        return simulate(reference_scenario(seed))
+    if scenario in ("convoy", "harbour"):
+        from clients.scenarios import extended
+
+        run = (
+            extended.convoy_scenario(seed)
+            if scenario == "convoy"
+            else extended.harbour_scenario(seed)
+        )
+        return [truth.scan for truth in run.scans]
+    raise ValueError(f"scenario: one of {', '.join(SCENARIOS[1:])}, got {scenario!r}")
 
 
 class Demo:
@@ -115,7 +143,7 @@ class Demo:
         if self.scenario == "continuous":
             self._run_continuous()
         else:
-            self._run_reference()
+            self._run_loop(looped_scans(self.scenario, self.seed))
 
     def _run_continuous(self) -> None:
         """The continuous scenario, forever, its times shifted to after the service's latest."""
@@ -132,8 +160,9 @@ class Demo:
             batch["time"] = scan.time + offset
             self.publisher.put(batch)
 
-    def _run_reference(self) -> None:
-        scans = simulate(reference_scenario(self.seed))
+    def _run_loop(self, scans: Sequence[SimulatedScan]) -> None:
+        """``scans`` in a loop, each loop's times after the previous one's (and after the
+        service's latest report)."""
         if not scans:
             return
         first = scans[0].time
@@ -206,7 +235,9 @@ def build_parser() -> argparse.ArgumentParser:
         default="continuous",
         help=(
             "continuous (default): targets born at random times, living a random while, "
-            "leaving or no longer seen; reference: the 100 s reference scenario in a loop"
+            "leaving or no longer seen; reference: the 100 s reference scenario in a loop; "
+            "convoy, harbour: the extended-object scenarios (a convoy in traffic, a boat "
+            "entering a harbour) in a loop"
         ),
     )
     parser.add_argument("--seed", type=int, default=0, help="scenario seed (default 0)")

@@ -45,6 +45,8 @@ def _annotation(hint: Any, meta: Any) -> Any:
     allowed values (its ``metadata``) on the number or on each item of a list."""
     bounds = {k: meta[k] for k in ("gt", "ge", "lt", "le") if k in meta}
     choices = meta.get("choices")
+    if hint is bool:
+        return Annotated[bool, Strict()]
     if hint is float:
         return Annotated[float, Strict(), Field(allow_inf_nan=False, **bounds)]
     if hint is int:

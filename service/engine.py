@@ -11,6 +11,10 @@ converts and tracks it, publishes a Track report or an Error report, and replace
 readers see (:mod:`service.reports`). A rejected batch changes no track. Configuration changes are
 validated and saved by the caller's thread (:mod:`service.config_store`) and applied by the
 worker before its next batch.
+
+Other work on the tracks (starting an extended track by hand: :meth:`Engine.start_extended_track`)
+runs on the worker too, between batches: :meth:`Engine.call_in_worker` queues a command behind
+the batches already waiting and waits for its answer.
 """
 
 from __future__ import annotations
@@ -24,7 +28,9 @@ import time
 from collections.abc import Callable
 from concurrent.futures import Future
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
+
+import numpy as np
 
 from service.config_store import ConfigApplied, ConfigStore
 from service.convert import batch_to_scan, report_dict, track_to_dict
@@ -46,11 +52,14 @@ from service.state_store import EngineCheckpoint, StateStore, restored_result
 from service.stats import Stats
 from service.viewers import ViewerHub
 from trackers.config import TrackerConfig
-from trackers.pipeline import TrackingPipeline
+from trackers.extended.tracker import ExtendedTracker, snapshot_of
+from trackers.pipeline import MAX_ABS_POSITION, TrackingPipeline
 from trackers.state import StateError
-from trackers.types import ScanRejected, TrackSnapshot
+from trackers.types import ScanRejected, StepResult, TrackSnapshot
 
-__all__ = ["Engine"]
+__all__ = ["CommandRefused", "Engine", "EngineUnavailable"]
+
+T = TypeVar("T")
 
 log = logging.getLogger("service.engine")
 
@@ -60,6 +69,74 @@ class _Stop:
 
 
 _STOP = _Stop()
+
+
+class EngineUnavailable(RuntimeError):
+    """The worker cannot take a command now: it is not running or stopping, its queue stayed
+    full, or it did not get to the command in time (the command then never runs)."""
+
+
+class CommandRefused(ValueError):
+    """A command refused by the worker before it changed anything; ``conflict`` when the
+    request is well-formed but the configuration does not allow it (e.g. extended tracking
+    switched off)."""
+
+    def __init__(self, detail: str, *, conflict: bool = False) -> None:
+        super().__init__(detail)
+        self.detail = detail
+        self.conflict = conflict
+
+
+def _extended_prior(
+    position: Any, velocity: Any, extent: Any
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A hand-started extended track's centroid, velocity and extent as arrays; raise
+    :class:`CommandRefused` unless they are finite, within ``MAX_ABS_POSITION`` (m) and the
+    extent is a 2x2 symmetric positive definite matrix."""
+    try:
+        pos = np.array(position, dtype=float).reshape(2)
+        vel = np.array(velocity, dtype=float).reshape(2)
+        ext = np.array(extent, dtype=float).reshape(2, 2)
+    except (TypeError, ValueError) as exc:
+        raise CommandRefused(f"position, velocity, extent: unusable: {exc}") from None
+    if not np.isfinite(pos).all() or np.abs(pos).max() > MAX_ABS_POSITION:
+        raise CommandRefused(f"position: finite numbers within ±{MAX_ABS_POSITION:g} m needed")
+    if not np.isfinite(vel).all():
+        raise CommandRefused("velocity: not finite numbers")
+    (a, b), (c, d) = ext.tolist()
+    if (
+        not np.isfinite(ext).all()
+        or abs(b - c) > 1e-9 * (1.0 + abs(b))
+        or a <= 0.0
+        or a * d - b * c <= 0.0
+    ):
+        raise CommandRefused("extent.matrix: not symmetric positive definite")
+    ext[0, 1] = ext[1, 0] = 0.5 * (b + c)
+    return pos, vel, ext
+
+
+class _Command:
+    """A function to run on the worker between batches; its answer goes to ``future``."""
+
+    __slots__ = ("fn", "future")
+
+    def __init__(self, fn: Callable[[TrackingPipeline], Any]) -> None:
+        self.fn = fn
+        self.future: Future[Any] = Future()
+
+    def run(self, pipeline: TrackingPipeline) -> None:
+        if not self.future.set_running_or_notify_cancel():  # the caller gave up: do nothing
+            return
+        try:
+            result = self.fn(pipeline)
+        except BaseException as exc:  # the caller's to handle
+            self.future.set_exception(exc)
+        else:
+            self.future.set_result(result)
+
+    def refuse(self, reason: str) -> None:
+        if self.future.set_running_or_notify_cancel():
+            self.future.set_exception(EngineUnavailable(reason))
 
 
 class Engine:
@@ -76,7 +153,7 @@ class Engine:
         put_timeout: float = 2.0,
         ingest_defaults: IngestConfig | None = None,
         config_file: Path | None = None,
-        pipeline_factory: Callable[[TrackerConfig], TrackingPipeline] = TrackingPipeline,
+        pipeline_factory: Callable[[TrackerConfig], TrackingPipeline] = TrackingPipeline.all_kinds,
         stop_drain_seconds: float = 1.0,
         max_batch_bytes: int = DEFAULT_MAX_BATCH_BYTES,
         queue_bytes: int = DEFAULT_QUEUE_BYTES,
@@ -95,7 +172,7 @@ class Engine:
         self.stats.queue_capacity = queue_size
         self._out = ReportOut(sink)
         self._refusals = Refusals(self.stats, self._out)
-        self._queue: queue.Queue[Item | _Stop] = queue.Queue(maxsize=queue_size)
+        self._queue: queue.Queue[Item | _Command | _Stop] = queue.Queue(maxsize=queue_size)
         self._put_timeout = put_timeout
         self.max_batch_bytes = max_batch_bytes
         self._queue_bytes = queue_bytes
@@ -317,6 +394,129 @@ class Engine:
         changed and where it was saved."""
         return self._config.apply(doc, merge=merge)
 
+    # -- commands on the worker ---------------------------------------------------------------
+
+    def call_in_worker(self, fn: Callable[[TrackingPipeline], T], timeout: float = 5.0) -> T:
+        """Run ``fn(pipeline)`` on the worker thread, between batches (after those queued
+        before it), and return its answer or raise its exception here. Raises
+        :class:`EngineUnavailable` when the worker is not running or stopping, when the queue
+        stayed full for ``timeout`` seconds, or when the worker did not start the command
+        within ``timeout`` seconds (it then never runs). A command takes a queue slot but none
+        of the queue's bytes; ``fn`` must be quick, as batches wait behind it."""
+        if self._thread is not None and threading.current_thread() is self._thread:
+            return fn(self._pipeline)  # from the worker itself: queueing would deadlock
+        if self._stopping.is_set() or not self.running:
+            raise EngineUnavailable("the tracker worker is not running")
+        command = _Command(fn)
+        deadline = time.monotonic() + timeout
+        try:
+            self._queue.put(command, timeout=max(0.0, timeout))
+        except queue.Full:
+            raise EngineUnavailable(
+                f"the ingest queue ({self._queue.maxsize} items) stayed full for {timeout} s"
+            ) from None
+        future = command.future
+        try:
+            result: T = future.result(timeout=max(0.0, deadline - time.monotonic()))
+        except TimeoutError:
+            if future.cancel():  # not started: it never will be
+                raise EngineUnavailable(
+                    f"the tracker worker did not take the command within {timeout} s"
+                ) from None
+            result = future.result()  # running now: its answer comes soon
+        return result
+
+    def start_extended_track(
+        self,
+        position: tuple[float, float],
+        velocity: tuple[float, float],
+        extent: np.ndarray | list[list[float]],
+        *,
+        position_std: float = 20.0,
+        velocity_std: float = 5.0,
+        expected_detections: float = 3.0,
+        at: float | None = None,
+        timeout: float = 5.0,
+    ) -> dict[str, Any]:
+        """Start a confirmed extended track by hand (:meth:`ExtendedTracker.start`) on the
+        worker, at the time of the last processed batch, or at ``at`` (not before it, nor
+        more than ``ingest.max_time_jump`` after it; before the first batch ``at`` is
+        required). Returns the new Track; the latest report (same ``seq``, not published
+        again) lists it at once. Raises :class:`CommandRefused` (nothing changed) for
+        unusable values or when extended tracking is switched off, and
+        :class:`EngineUnavailable` as :meth:`call_in_worker`."""
+        pos, vel, ext = _extended_prior(position, velocity, extent)
+
+        def command(pipeline: TrackingPipeline) -> dict[str, Any]:
+            tracker = next((p for p in pipeline.peers if p.kind == "extended"), None)
+            if not isinstance(tracker, ExtendedTracker):
+                raise CommandRefused("extended tracking is not part of this tracker", conflict=True)
+            if not pipeline.config.extended.enabled:
+                raise CommandRefused(
+                    "extended tracking is switched off (configuration extended.enabled)",
+                    conflict=True,
+                )
+            last = pipeline.last_time
+            if last is None:
+                if at is None:
+                    raise CommandRefused("time: required before the first batch is processed")
+                t = float(at)
+            else:
+                t = last if at is None else float(at)
+                if t < last:
+                    raise CommandRefused(
+                        f"time: {t} is before the last processed batch's time {last}"
+                    )
+                jump = self._applied_ingest.max_time_jump
+                if t > last + jump:
+                    raise CommandRefused(
+                        f"time: {t} is more than ingest.max_time_jump ({jump} s) after the "
+                        f"last processed batch's time {last}"
+                    )
+            try:
+                track = tracker.start(
+                    t,
+                    pos,
+                    vel,
+                    ext,
+                    position_std=position_std,
+                    velocity_std=velocity_std,
+                    expected_detections=expected_detections,
+                )
+            except ValueError as exc:
+                raise CommandRefused(str(exc)) from None
+            self._refresh_state(t)
+            return track_to_dict(snapshot_of(track))
+
+        return self.call_in_worker(command, timeout)
+
+    def _refresh_state(self, at: float) -> None:
+        """Replace the latest report by one with the same ``seq`` and the pipeline's tracks as
+        they are now (the worker, after a command changed them). Not published over Zenoh:
+        the next batch's report is; the live view gets it."""
+        prev = self._state
+        old = prev.result
+        tracks = self._pipeline.snapshot()
+        confirmed_snaps = tuple(t for t in tracks if t.confirmed)
+        if old is not None:
+            t, sensor_id, deleted = old.time, old.sensor_id, old.deleted
+        else:  # no batch yet: the time of the tracks started by hand
+            before = prev.report.get("time")
+            t, sensor_id, deleted = (at if before is None else max(before, at)), "", ()
+
+        def snapshot(confirmed_only: bool) -> tuple[TrackSnapshot, ...]:
+            return confirmed_snaps if confirmed_only else tracks
+
+        result = StepResult(time=t, sensor_id=sensor_id, deleted=deleted, snapshot=snapshot)
+        confirmed = [track_to_dict(s) for s in confirmed_snaps]
+        report = report_dict(self._seq, result, prev.report.get("processing_ms", 0.0), confirmed)
+        if old is None:
+            report["sensor_id"] = prev.report.get("sensor_id")
+        state = ReportState.of(report, result)
+        self._state = state
+        self.stats.tracks_confirmed = len(confirmed)
+        self.view.publish(state)
+
     # -- reading ----------------------------------------------------------------------------
 
     @property
@@ -371,11 +571,13 @@ class Engine:
             if isinstance(rest, Item):
                 self._release(len(rest.payload))
                 self._refusals.drop(rest, "the service is stopping")
+            elif isinstance(rest, _Command):
+                rest.refuse("the service is stopping")
         self._refusals.flush_log()
 
-    def _run_once(self, q: queue.Queue[Item | _Stop]) -> bool:
-        """Take at most one batch, then release what the reorder window lets go; ``False``
-        when the worker should stop."""
+    def _run_once(self, q: queue.Queue[Item | _Command | _Stop]) -> bool:
+        """Take at most one batch (or command), then release what the reorder window lets go;
+        ``False`` when the worker should stop."""
         timeout = self._held.wait_time(time.monotonic(), self._applied_ingest.reorder_window)
         if self._stopping.is_set():
             timeout = 0.05 if timeout is None else min(timeout, 0.05)
@@ -385,11 +587,16 @@ class Engine:
             item = None
         if isinstance(item, _Stop):
             return False
-        if item is not None:
+        if isinstance(item, Item):
             self._release(len(item.payload))
         try:
             self._apply_pending()
-            if item is not None:
+            if isinstance(item, _Command):
+                if self._stopping.is_set() and time.monotonic() > self._stop_deadline:
+                    item.refuse("the service is stopping")
+                else:
+                    item.run(self._pipeline)
+            elif item is not None:
                 if self._stopping.is_set() and time.monotonic() > self._stop_deadline:
                     self._refusals.drop(item, "the service is stopping")
                 else:
@@ -399,7 +606,10 @@ class Engine:
                 for held, batch in self._held.due(time.monotonic(), window):
                     self._process(held, batch)
         except Exception as exc:
-            if item is not None and not item.future.done():  # refused, never lost
+            if isinstance(item, _Command):
+                if not item.future.done():
+                    item.refuse(f"internal error: {type(exc).__name__}: {exc}")
+            elif item is not None and not item.future.done():  # refused, never lost
                 self._refusals.reject(item, "internal_error", f"{type(exc).__name__}: {exc}", None)
             raise
         return not (self._stopping.is_set() and item is None and q.empty())

@@ -102,6 +102,10 @@ def demo_command(settings: Settings) -> list[str] | None:
         "--log-level",
         s.log_level,
     ]
+    if s.demo_scenario != "continuous":
+        command += ["--scenario", s.demo_scenario]
+    if s.demo_speed != 1.0:
+        command += ["--speed", repr(s.demo_speed)]
     return command
 
 

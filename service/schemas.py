@@ -12,6 +12,7 @@ shapes as plain dicts (see :mod:`service.convert`) and serialises them with orjs
 
 from __future__ import annotations
 
+import math
 import re
 from typing import Annotated, Any, Literal, NotRequired
 
@@ -20,9 +21,11 @@ from pydantic import (
     AllowInfNan,
     BaseModel,
     ConfigDict,
+    Discriminator,
     FailFast,
     Field,
     Strict,
+    Tag,
     ValidationError,
     model_validator,
     with_config,
@@ -36,12 +39,17 @@ __all__ = [
     "ERROR_REASONS",
     "MAX_ABS_AMPLITUDE",
     "MAX_ABS_RANGE_RATE",
+    "MAX_ABS_SPEED",
     "MAX_ID_LENGTH",
+    "MAX_SEMI_AXIS",
     "SENSOR_ID_PATTERN",
     "BatchError",
     "DetectionBatchIn",
     "DetectionIn",
     "ErrorReportOut",
+    "ExtendedTrackIn",
+    "ExtentAxesIn",
+    "ExtentMatrixIn",
     "ExtentOut",
     "IngestAcceptedOut",
     "IngestConfig",
@@ -50,6 +58,7 @@ __all__ = [
     "TrackOut",
     "TrackReportOut",
     "decode_batch",
+    "decode_extended_track",
     "format_validation_error",
     "valid_sensor_id",
 ]
@@ -305,6 +314,165 @@ def decode_batch(payload: bytes | str) -> DetectionBatchIn:
         if errors and errors[0]["type"] == "model_type" and not errors[0]["loc"]:
             raise BatchError("invalid_batch", "the batch must be a JSON object") from None
         raise BatchError("invalid_batch", format_validation_error(exc, errors)) from None
+
+
+# -- starting an extended track by hand (POST /api/v1/tracks/extended) ----------------------
+
+#: The longest semi-axis of a hand-started extended track's extent (m), and the shortest.
+MAX_SEMI_AXIS = 1e5
+MIN_SEMI_AXIS = 1e-3
+#: The largest magnitude of a hand-started track's velocity components (m/s).
+MAX_ABS_SPEED = 1e5
+_MAX_EXTENT_ENTRY = MAX_SEMI_AXIS**2
+_MIN_EXTENT_EIGENVALUE = MIN_SEMI_AXIS**2
+
+ExtentEntry = _bounded(_MAX_EXTENT_ENTRY)
+Speed = _bounded(MAX_ABS_SPEED)
+
+
+def _check_extent_matrix(m: tuple[tuple[float, float], tuple[float, float]]) -> Any:
+    (a, b), (c, d) = m
+    if abs(b - c) > 1e-9 * (1.0 + abs(b)) or a <= 0.0 or a * d - b * c <= 0.0:
+        raise ValueError("not symmetric positive definite")
+    mean, half = 0.5 * (a + d), math.hypot(0.5 * (a - d), 0.5 * (b + c))
+    if mean - half < _MIN_EXTENT_EIGENVALUE:
+        raise ValueError(
+            f"its smaller eigenvalue must be >= {_MIN_EXTENT_EIGENVALUE:g} m² "
+            f"(a semi-axis of {MIN_SEMI_AXIS:g} m)"
+        )
+    return m
+
+
+class ExtentMatrixIn(BaseModel):
+    """An extent as its shape matrix ``X``: the ellipse ``(p − c)ᵀ X⁻¹ (p − c) ≤ 1``."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+    matrix: Annotated[
+        tuple[tuple[ExtentEntry, ExtentEntry], tuple[ExtentEntry, ExtentEntry]],
+        AfterValidator(_check_extent_matrix),
+    ] = Field(
+        description=(
+            "2x2 symmetric positive definite matrix [[a, b], [b, c]], m²; its eigenvalues are "
+            f"the squared semi-axes (from {MIN_SEMI_AXIS:g} m to {MAX_SEMI_AXIS:g} m)"
+        )
+    )
+
+
+SemiAxis = Annotated[float, Strict(), AllowInfNan(False), Field(ge=MIN_SEMI_AXIS, le=MAX_SEMI_AXIS)]
+
+
+class ExtentAxesIn(BaseModel):
+    """An extent as an ellipse: its semi-axes and the orientation of the first one."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+    semi_axes: tuple[SemiAxis, SemiAxis] = Field(
+        description="[major, minor] semi-axes, m (the first along `orientation`)"
+    )
+    orientation: Annotated[Finite, Field(ge=-2 * math.pi, le=2 * math.pi)] = Field(
+        default=0.0, description="angle of the first semi-axis from the x axis (east), rad"
+    )
+
+    def matrix(self) -> list[list[float]]:
+        """The shape matrix ``R diag(a², b²) Rᵀ``."""
+        (a, b), t = self.semi_axes, self.orientation
+        c, s = math.cos(t), math.sin(t)
+        a2, b2 = a * a, b * b
+        off = (a2 - b2) * c * s
+        return [[a2 * c * c + b2 * s * s, off], [off, a2 * s * s + b2 * c * c]]
+
+
+_EXTENT_FORMS = (
+    'give exactly one form: {"matrix": [[a, b], [b, c]]} or '
+    '{"semi_axes": [major, minor], "orientation": rad}'
+)
+
+
+def _extent_form(value: Any) -> str | None:
+    if isinstance(value, BaseModel):
+        return "matrix" if isinstance(value, ExtentMatrixIn) else "axes"
+    if not isinstance(value, dict):
+        return None
+    has_matrix = "matrix" in value
+    has_axes = "semi_axes" in value or "orientation" in value
+    if has_matrix == has_axes:
+        return None
+    return "matrix" if has_matrix else "axes"
+
+
+ExtentIn = Annotated[
+    Annotated[ExtentMatrixIn, Tag("matrix")] | Annotated[ExtentAxesIn, Tag("axes")],
+    Discriminator(
+        _extent_form, custom_error_type="extent_form", custom_error_message=_EXTENT_FORMS
+    ),
+]
+
+
+class ExtendedTrackIn(BaseModel):
+    """A confirmed extended track to start by hand: its centroid, velocity and extent prior."""
+
+    model_config = ConfigDict(
+        extra="forbid",
+        frozen=True,
+        json_schema_extra={
+            "examples": [
+                {
+                    "position": [1200.0, -350.0],
+                    "velocity": [8.0, 2.0],
+                    "extent": {"semi_axes": [60.0, 15.0], "orientation": 0.3},
+                    "position_std": 20.0,
+                }
+            ]
+        },
+    )
+
+    position: tuple[Position, Position] = Field(description="[x, y] of the centroid, m")
+    velocity: tuple[Speed, Speed] = Field(
+        default=(0.0, 0.0), description="[vx, vy] of the centroid, m/s"
+    )
+    extent: ExtentIn = Field(
+        description="the extent prior: its shape matrix, or its semi-axes and orientation"
+    )
+    position_std: Annotated[Finite, Field(gt=0.0, le=1e6)] = Field(
+        default=20.0, description="standard deviation of the centroid per axis, m"
+    )
+    velocity_std: Annotated[Finite, Field(gt=0.0, le=1e4)] = Field(
+        default=5.0, description="standard deviation of the velocity per axis, m/s"
+    )
+    expected_detections: Annotated[Finite, Field(gt=0.0, le=1e4)] = Field(
+        default=3.0, description="detections of the object expected per scan"
+    )
+    time: Time | None = Field(
+        default=None,
+        description=(
+            "when the track starts, s: by default the last processed batch's time; required "
+            "before the first batch; never before the last processed batch"
+        ),
+    )
+
+    def extent_matrix(self) -> list[list[float]]:
+        """The extent's shape matrix, m²."""
+        ext = self.extent
+        if isinstance(ext, ExtentMatrixIn):
+            return [list(row) for row in ext.matrix]
+        return ext.matrix()
+
+
+def decode_extended_track(payload: bytes | str) -> ExtendedTrackIn:
+    """Parse and validate a request to start an extended track; raise ``ValueError`` whose
+    message names the field (``"extent.matrix: not symmetric positive definite"``)."""
+    try:
+        return ExtendedTrackIn.model_validate_json(payload)
+    except ValidationError as exc:
+        errors = exc.errors(include_url=False, include_input=False)
+        if errors and errors[0]["type"] == "model_type" and not errors[0]["loc"]:
+            raise ValueError("the body must be a JSON object") from None
+        for err in errors:  # the extent's form is no place of its own: drop its tag
+            loc = tuple(err["loc"])
+            if len(loc) > 2 and loc[0] == "extent" and loc[1] in ("matrix", "axes"):
+                err["loc"] = (loc[0], *loc[2:])
+        raise ValueError(format_validation_error(exc, errors)) from None
 
 
 # -- output ---------------------------------------------------------------------------------

@@ -40,6 +40,7 @@ from service.schemas import MAX_REORDER_WINDOW, IngestConfig
 
 __all__ = [
     "DEFAULT_CONFIG_NAME",
+    "DEMO_SCENARIOS",
     "Settings",
     "SettingsLoadError",
     "api_token_source",
@@ -51,6 +52,10 @@ __all__ = [
 
 #: The config file's name in ``state_dir`` when ``config_file`` is not set.
 DEFAULT_CONFIG_NAME = "config.json"
+
+#: The demo client's scenarios (``python -m clients.demo --scenario``): ``--demo`` alone runs
+#: the first, ``--demo convoy`` the one named.
+DEMO_SCENARIOS = ("continuous", "reference", "convoy", "harbour")
 
 _INGEST = IngestConfig.model_fields
 _KEY_PREFIX_RE = re.compile(r"^[^/*$#?\s]+(/[^/*$#?\s]+)*$")
@@ -227,13 +232,45 @@ class Settings(BaseSettings):
     demo: bool = Field(
         default=False,
         description=(
-            "also run the demo client (python -m clients.demo): the reference scenario "
-            "published to this service in real time, and a summary of its tracks logged"
+            "also run the demo client (python -m clients.demo): a simulated scenario "
+            "published to this service in real time, and a summary of its tracks logged; "
+            "--demo SCENARIO (or a scenario's name as the value) chooses the scenario: "
+            + ", ".join(DEMO_SCENARIOS)
         ),
+    )
+    demo_scenario: Literal["continuous", "reference", "convoy", "harbour"] = Field(
+        default="continuous",
+        description=(
+            "the demo's scenario: continuous (targets come and go), reference (the 100 s "
+            "reference scenario in a loop), convoy or harbour (extended objects, in a loop)"
+        ),
+    )
+    demo_speed: float = Field(
+        default=1.0,
+        gt=0,
+        le=1000,
+        allow_inf_nan=False,
+        description="the demo's pace, times real time",
     )
     demo_summary_interval: float = Field(
         default=5.0, gt=0, description="seconds between the demo's one-line track summaries"
     )
+
+    @model_validator(mode="before")
+    @classmethod
+    def _demo_scenario(cls, data: Any) -> Any:
+        """``demo`` given a scenario's name (``--demo convoy``, ``TRACKER_DEMO=convoy``):
+        the demo on, with that scenario."""
+        if isinstance(data, dict) and isinstance(data.get("demo"), str):
+            name = data["demo"].strip().lower()
+            if name in DEMO_SCENARIOS:
+                data = {**data, "demo": True, "demo_scenario": name}
+        return data
+
+    @field_validator("demo_scenario", mode="before")
+    @classmethod
+    def _lower_scenario(cls, value: Any) -> Any:
+        return value.strip().lower() if isinstance(value, str) else value
 
     @field_validator("zenoh_listen", "zenoh_connect", mode="before")
     @classmethod
@@ -377,7 +414,17 @@ def build_parser(prog: str = "tracker-service") -> argparse.ArgumentParser:
         default = _default_text(name, field)
         if default is not None:
             help_text += f" (default: {default})"
-        if field.annotation is bool:
+        if name == "demo":  # --demo, --demo SCENARIO, --no-demo
+            parser.add_argument(
+                flag,
+                nargs="?",
+                const=True,  # --demo alone: on, with demo_scenario (continuous by default)
+                choices=DEMO_SCENARIOS,
+                metavar="SCENARIO",
+                help=help_text,
+            )
+            parser.add_argument("--no-demo", dest=name, action="store_false", help="no demo")
+        elif field.annotation is bool:
             parser.add_argument(flag, action=argparse.BooleanOptionalAction, help=help_text)
         else:
             parser.add_argument(flag, metavar=name.upper(), help=help_text)

@@ -16,6 +16,7 @@ __all__ = [
     "ASSOCIATION_METHODS",
     "INITIATION_METHODS",
     "AssociationConfig",
+    "ExtendedConfig",
     "GatingConfig",
     "InitiationConfig",
     "MeasurementConfig",
@@ -290,6 +291,69 @@ class AssociationConfig:
 
 
 @dataclass(frozen=True)
+class ExtendedConfig:
+    """Extended objects and groups: random-matrix tracks (paper 002, :mod:`trackers.extended`).
+
+    A track's centroid moves as nearly constant velocity with acceleration PSD ``q``; its extent
+    ``X`` (the ellipse ``(p − c)ᵀ X⁻¹ (p − c) ≤ 1`` holding the object) keeps its shape with an
+    agility time constant ``tau``; ``z_scale`` relates ``X`` to the spread of the detections
+    (1/4 for scatterers spread uniformly over the ellipse). Detections in a track's gate are
+    split into subsets whose members are less than ``resolution_distance`` apart; the likeliest
+    union of subsets is the track's. A cluster of at least ``min_detections`` detections, found
+    in ``birth_scans`` scans in a row moving as one, starts a track. Individual tracks inside a
+    track's resolution cell (its extent grown by half the resolution distance) have detection
+    probability ``in_cell_pd``; those inside its extent that move with it (velocities within
+    ``group_speed_spread``) are absorbed. A track is deleted like an individual one (the
+    sequential test of ``track_management``) or after ``max_coast_time`` without detections.
+    """
+
+    enabled: bool = _field(True, "track extended objects and groups alongside individual targets")
+    q: float = _field(0.5, "centroid acceleration noise PSD, m²/s³", gt=0, le=1e4)
+    tau: float = _field(20.0, "time constant of extent changes, s", gt=0, le=1e6)
+    z_scale: float = _field(
+        0.25, "spread of the detections relative to the extent (1/4: uniform)", gt=0, le=10.0
+    )
+    resolution_distance: float = _field(
+        200.0, "detections closer than this belong to one subset, m", gt=0, le=1e5
+    )
+    gate_probability: float = _field(
+        0.9999, "probability that a detection of the object falls in its gate", gt=0, lt=1
+    )
+    min_detections: int = _field(
+        3, "fewest detections of a cluster that may start a track", ge=2, le=1000
+    )
+    birth_scans: int = _field(
+        3, "scans in a row a cluster must be seen to start a track", ge=1, le=100
+    )
+    max_speed: float = _field(
+        60.0, "fastest group or object the birth search follows, m/s", gt=0, le=1e4
+    )
+    group_speed_spread: float = _field(
+        3.0, "members of one group move within this speed of each other, m/s", gt=0, le=1e4
+    )
+    in_cell_pd: float = _field(
+        0.5, "detection probability of an individual track inside a resolution cell", gt=0, le=1
+    )
+    max_coast_time: float = _field(
+        30.0, "an extended track is deleted after this long without detections, s", gt=0, le=1e6
+    )
+
+    def __post_init__(self) -> None:
+        _check_bounds(self, "extended")
+        if not isinstance(self.enabled, bool):
+            raise ValueError(f"extended.enabled: expected true or false, got {self.enabled!r}")
+        for name in ("min_detections", "birth_scans"):
+            v = getattr(self, name)
+            if not (isinstance(v, int) and not isinstance(v, bool)):
+                raise ValueError(f"extended.{name}: expected an integer, got {v!r}")
+
+    @property
+    def gate_threshold(self) -> float:
+        """γ with P(χ²₂ ≤ γ) = P_G: γ = −2 ln(1 − P_G)."""
+        return -2.0 * math.log1p(-self.gate_probability)
+
+
+@dataclass(frozen=True)
 class TrackerConfig:
     """Everything the trackers can be told."""
 
@@ -299,6 +363,7 @@ class TrackerConfig:
     initiation: InitiationConfig = field(default_factory=InitiationConfig)
     gating: GatingConfig = field(default_factory=GatingConfig)
     track_management: TrackManagementConfig = field(default_factory=TrackManagementConfig)
+    extended: ExtendedConfig = field(default_factory=ExtendedConfig)
 
     def to_dict(self) -> dict[str, Any]:
         """Nested plain dicts and lists, JSON-ready."""
@@ -347,6 +412,10 @@ def _build(cls: type, data: Any, path: str) -> Any:
 def _typed(hint: Any, value: Any, path: str) -> Any:
     """``value`` as the field's type: a JSON number for ``float`` (never a bool or a string),
     a string for ``str``, a list of those for ``tuple[..., ...]``. Raises ``ValueError``."""
+    if hint is bool:
+        if isinstance(value, bool):
+            return value
+        raise ValueError(f"{path}: expected true or false, got {value!r}")
     if hint is float:
         if isinstance(value, int | float) and not isinstance(value, bool):
             return float(value)

@@ -300,6 +300,7 @@ class IndividualTracker:
 
         tracks = pred.tracks
         claims = np.full(scan.size, -np.inf)
+        masked = np.zeros(0)  # each old track's P_D / the sensor's, below 1 inside a peer's cell
         if len(tracks):
             pd = np.full(len(tracks), pd_sensor)
             if directives.pd:
@@ -307,8 +308,11 @@ class IndividualTracker:
                     p = directives.pd.get(tid)
                     if p is not None:
                         pd[i] = p
+            masked = np.minimum(pd / pd_sensor, 1.0)
             tracks, claims = self._update_existing(pred, scan, pd, lam_fa)
-            tracks = tracks.take(_best_of_each_origin(tracks))
+            best = _best_of_each_origin(tracks)
+            tracks = tracks.take(best)
+            masked = masked[best]
 
         if config.initiation.method == "two_point":
             born, candidates = self._initiate_two_point(
@@ -322,9 +326,13 @@ class IndividualTracker:
         if directives.adopt:
             tracks = tracks.concat(_adopted(directives.adopt, config, counters))
 
-        status = sequential_test(
-            tracks.score, tracks.peak, tracks.confirmed, t - tracks.updated, tm
-        )
+        # A track whose detection probability a peer lowered (a vehicle inside a convoy's
+        # resolution cell) is expected to go undetected for longer: its coasting time counts
+        # at the rate P_D / P_D,sensor while it is there.
+        coast = t - tracks.updated
+        if masked.size and (masked < 1.0).any():
+            coast[: masked.size] *= masked
+        status = sequential_test(tracks.score, tracks.peak, tracks.confirmed, coast, tm)
         delete = status.delete
         delete[n_old:] = False  # a track is never deleted in the scan that starts or adopts it
         deleted_ids = tuple(tracks.ids[delete & tracks.confirmed].tolist())

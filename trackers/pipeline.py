@@ -20,6 +20,7 @@ from typing import Any
 import numpy as np
 
 from trackers.config import TrackerConfig
+from trackers.extended.tracker import ExtendedTracker
 from trackers.individual import IndividualTracker
 from trackers.peers import (
     PeerError,
@@ -44,6 +45,7 @@ __all__ = [
     "TrackingPipeline",
     "check_scan",
     "make_point_tracker",
+    "standard_peers",
 ]
 
 #: Largest |x| or |y| a detection may have (m): far beyond any sensor of a local frame, and
@@ -63,6 +65,11 @@ POINT_TRACKERS: dict[str, Callable[[TrackerConfig], PointTracker]] = {"gnn": Ind
 def make_point_tracker(config: TrackerConfig) -> PointTracker:
     """The point tracker that ``config.association.method`` names."""
     return POINT_TRACKERS[config.association.method](config)
+
+
+def standard_peers(config: TrackerConfig) -> tuple[PeerTracker, ...]:
+    """One of each peer kind: extended objects and groups (:mod:`trackers.extended`)."""
+    return (ExtendedTracker(config),)
 
 
 def check_scan(scan: Scan, last_time: float | None) -> None:
@@ -157,6 +164,14 @@ class TrackingPipeline:
         if len(set(kinds)) != len(kinds):
             raise ValueError(f"two peers of one kind: {kinds}")
         self._last_time: float | None = None
+
+    @classmethod
+    def all_kinds(cls, config: TrackerConfig | None = None) -> TrackingPipeline:
+        """A pipeline with every track kind the trackers have: the point tracker and the
+        peers of :func:`standard_peers` (each switched on and off by its configuration
+        section). The service runs this one."""
+        config = config or TrackerConfig()
+        return cls(config, peers=standard_peers(config))
 
     @property
     def individual(self) -> PointTracker:

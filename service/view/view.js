@@ -4,6 +4,7 @@
 
 (function () {
   const TRAIL_POINTS = 40; // positions kept per track, client-side
+  const EXTENDED_TRAIL_POINTS = 12; // an extended track's centroid: a short trail
   const VECTOR_SECONDS = 10; // a velocity vector shows where the track is in this many seconds
   const PICK_PIXELS = 12; // a click this close to a track selects it
   const DRAG_PIXELS = 4; // a press that moves less than this is a click
@@ -54,9 +55,10 @@
     }
   }
 
-  function drawTrail(t, color) {
-    const trail = model.trails.get(t.id);
-    if (!trail || trail.length < 2) return;
+  function drawTrail(t, color, points = TRAIL_POINTS) {
+    const whole = model.trails.get(t.id);
+    if (!whole || whole.length < 2) return;
+    const trail = whole.slice(-points);
     ctx.strokeStyle = color;
     ctx.lineWidth = 1;
     ctx.beginPath();
@@ -94,6 +96,83 @@
     ctx.globalAlpha = 1;
   }
 
+  // the extent of an extended track in world terms: semi-axes (m) and the major axis's angle
+  // (rad, counter-clockwise from +x, y north); from `semi_axes`/`orientation`, or else from
+  // the eigenvectors of `matrix` (the ellipse (p - c)' X^-1 (p - c) <= 1)
+  function extentAxes(extent) {
+    if (!extent) return null;
+    const axes = extent.semi_axes;
+    if (Array.isArray(axes) && axes.length === 2 && Number.isFinite(extent.orientation)) {
+      return { major: axes[0], minor: axes[1], angle: extent.orientation };
+    }
+    const m = extent.matrix;
+    if (!Array.isArray(m) || m.length !== 2) return null;
+    const [a, b, c] = [m[0][0], m[0][1], m[1][1]];
+    const mean = (a + c) / 2;
+    const root = Math.hypot((a - c) / 2, b);
+    return {
+      major: Math.sqrt(Math.max(mean + root, 0)),
+      minor: Math.sqrt(Math.max(mean - root, 0)),
+      angle: 0.5 * Math.atan2(2 * b, a - c),
+    };
+  }
+
+  // the extent ellipse on the screen: centre, semi-axes in CSS pixels, and the rotation the
+  // canvas takes (its y axis points down, so a counter-clockwise world angle is negated)
+  function screenEllipse(t) {
+    const axes = extentAxes(t.extent);
+    if (!axes) return null;
+    const [sx, sy] = toScreen(t.position[0], t.position[1]);
+    return {
+      sx,
+      sy,
+      rx: Math.max(axes.major * view.scale, 1),
+      ry: Math.max(axes.minor * view.scale, 1),
+      rotation: -axes.angle,
+    };
+  }
+
+  // whether the screen point (px, py) is inside a screen ellipse
+  function insideEllipse(e, px, py) {
+    const dx = px - e.sx;
+    const dy = py - e.sy;
+    const cos = Math.cos(e.rotation);
+    const sin = Math.sin(e.rotation);
+    const u = (dx * cos + dy * sin) / e.rx; // along the major axis
+    const v = (-dx * sin + dy * cos) / e.ry; // along the minor axis
+    return u * u + v * v <= 1;
+  }
+
+  // an extended object or group: its extent ellipse (outline, faint fill), the centroid with
+  // its id and velocity vector, and a short trail of the centroid
+  function drawExtended(t, style) {
+    const e = screenEllipse(t);
+    if (!e) {
+      drawIndividual(t, style);
+      return;
+    }
+    ctx.globalAlpha = style.alpha;
+    drawTrail(t, style.trail, EXTENDED_TRAIL_POINTS);
+    ctx.beginPath();
+    ctx.ellipse(e.sx, e.sy, e.rx, e.ry, e.rotation, 0, 2 * Math.PI);
+    ctx.fillStyle = style.fill;
+    ctx.fill();
+    ctx.strokeStyle = style.selected ? "#ffffff" : style.color;
+    ctx.lineWidth = style.selected ? 2.5 : 1.5;
+    ctx.stroke();
+    ctx.lineWidth = 1.5;
+    drawVelocity(t, e.sx, e.sy, style.color);
+    ctx.fillStyle = style.color;
+    ctx.beginPath();
+    ctx.arc(e.sx, e.sy, style.radius - 1, 0, 2 * Math.PI);
+    ctx.fill();
+    if (style.label) {
+      ctx.font = "12px system-ui, sans-serif";
+      ctx.fillText(t.id, e.sx + 7, e.sy - 7);
+    }
+    ctx.globalAlpha = 1;
+  }
+
   // any kind this page does not know yet: a hollow square at its position
   function drawOther(t, style) {
     const [sx, sy] = toScreen(t.position[0], t.position[1]);
@@ -108,8 +187,30 @@
     ctx.globalAlpha = 1;
   }
 
-  // by track kind; `extended` (ellipses) and `formation` (members joined) come later
-  const DRAW_KIND = { individual: drawIndividual };
+  // by track kind; `formation` (members joined) comes later
+  const DRAW_KIND = { individual: drawIndividual, extended: drawExtended };
+
+  // colours by track kind (and status); a kind not here takes the individual's
+  const PALETTE = {
+    individual: {
+      confirmed: { color: "#5fb8ff", trail: "#2f6d9c", fill: "rgba(95, 184, 255, 0.12)" },
+      tentative: { color: "#9aa7b5", trail: "#56606b", fill: "rgba(154, 167, 181, 0.08)" },
+    },
+    extended: {
+      confirmed: { color: "#e07ce8", trail: "#8e4a94", fill: "rgba(224, 124, 232, 0.14)" },
+      tentative: { color: "#b79ab9", trail: "#6b5a6d", fill: "rgba(183, 154, 185, 0.08)" },
+    },
+  };
+
+  // where a click lands on a drawn track: its screen geometry, for picking and for tests
+  function screenShape(t) {
+    if (t.kind === "extended") {
+      const e = screenEllipse(t);
+      if (e) return e;
+    }
+    const [sx, sy] = toScreen(t.position[0], t.position[1]);
+    return { sx, sy };
+  }
 
   function drawTrack(t, style) {
     (DRAW_KIND[t.kind] || drawOther)(t, style);
@@ -176,16 +277,17 @@
     const drawn = showTentative ? model.tentative.concat(model.confirmed) : model.confirmed;
     for (const t of drawn) {
       const confirmed = t.status === "confirmed";
+      const colours = (PALETTE[t.kind] || PALETTE.individual)[confirmed ? "confirmed" : "tentative"];
       drawTrack(t, {
         alpha: confirmed ? 1 : 0.35,
-        color: confirmed ? "#5fb8ff" : "#9aa7b5",
-        trail: confirmed ? "#2f6d9c" : "#56606b",
+        color: colours.color,
+        trail: colours.trail,
+        fill: colours.fill,
         radius: confirmed ? 4 : 3,
         label: confirmed,
         selected: t.id === model.selected,
       });
-      const [sx, sy] = toScreen(t.position[0], t.position[1]);
-      screenTracks.push({ id: t.id, kind: t.kind, status: t.status, sx, sy });
+      screenTracks.push({ id: t.id, kind: t.kind, status: t.status, ...screenShape(t) });
     }
     publishState(drawn);
   }
@@ -216,7 +318,9 @@
       scale: view.scale,
       offsetX: view.offsetX,
       offsetY: view.offsetY,
-      tracks: screenTracks.slice(), // {id, kind, status, sx, sy}: CSS pixels in the canvas
+      // {id, kind, status, sx, sy}: CSS pixels in the canvas; extended tracks add their
+      // ellipse's semi-axes rx, ry (CSS pixels) and the canvas's rotation (rad, clockwise)
+      tracks: screenTracks.slice(),
       detections: model.detections.length / 2,
     };
   }
@@ -242,6 +346,21 @@
     return model.confirmed.find((t) => t.id === id) || model.tentative.find((t) => t.id === id);
   }
 
+  // rows the details panel adds by track kind
+  const DETAIL_KIND = {
+    extended(t) {
+      const axes = extentAxes(t.extent);
+      return [
+        [
+          "semi-axes",
+          axes ? `${fmt(axes.major, 1)}, ${fmt(axes.minor, 1)} m` : "–",
+        ],
+        ["orientation", axes ? `${fmt((axes.angle * 180) / Math.PI, 1)}°` : "–"],
+        ["detections", String((t.detection_ids || []).length)],
+      ];
+    },
+  };
+
   function showDetails() {
     const box = el("details");
     if (model.selected === null) {
@@ -263,12 +382,14 @@
       rows.push(
         ["status", t.status],
         ["kind", t.kind],
+        ["id", t.id],
         ["position", `${fmt(t.position[0], 1)}, ${fmt(t.position[1], 1)} m`],
         ["velocity", `${fmt(t.velocity[0], 1)}, ${fmt(t.velocity[1], 1)} m/s`],
         ["speed", `${fmt(speed, 1)} m/s`],
         ["score", fmt(t.score, 2)],
         ["hits", String(t.hits)],
       );
+      if (DETAIL_KIND[t.kind]) rows.push(...DETAIL_KIND[t.kind](t));
       for (const [mode, p] of Object.entries(t.model_probabilities || {})) {
         rows.push([`p(${mode})`, fmt(p, 3)]);
       }
@@ -296,7 +417,14 @@
 
   function fit() {
     const pts = [];
-    for (const t of model.confirmed.concat(model.tentative)) pts.push(t.position);
+    for (const t of model.confirmed.concat(model.tentative)) {
+      pts.push(t.position);
+      const axes = t.kind === "extended" ? extentAxes(t.extent) : null;
+      if (axes) {
+        const [x, y] = t.position;
+        pts.push([x - axes.major, y - axes.major], [x + axes.major, y + axes.major]);
+      }
+    }
     const d = model.detections;
     for (let i = 0; i + 1 < d.length; i += 2) pts.push([d[i], d[i + 1]]);
     if (pts.length === 0) return false;
@@ -407,6 +535,18 @@
       if (dist < bestDist || (dist === bestDist && t.status === "confirmed")) {
         best = t;
         bestDist = dist;
+      }
+    }
+    if (!best) {
+      // no dot or centroid near: the smallest extent ellipse around the click, confirmed first
+      let bestArea = Infinity;
+      for (const t of screenTracks) {
+        if (t.rx === undefined || !insideEllipse(t, px, py)) continue;
+        const area = t.rx * t.ry * (t.status === "confirmed" ? 1 : 1e6);
+        if (area < bestArea) {
+          best = t;
+          bestArea = area;
+        }
       }
     }
     model.selected = best ? best.id : null;

@@ -25,6 +25,7 @@ ROOT = Path(__file__).resolve().parents[2]
 ARTIFACTS = ROOT / "test-artifacts"
 SCANS = 25
 MIN_TRACKS = 20
+MAX_CLUSTER_SCANS = 80  # scans of the extended test's cluster, at most
 
 
 def _driver() -> Any:
@@ -95,3 +96,125 @@ def test_the_view_draws_the_services_tracks_and_details(service: RunningService)
     finally:
         driver.quit()
         session.close()
+
+
+def _cluster_batches(n: int, seed: int = 4) -> list[dict[str, Any]]:
+    """A convoy-like cluster: ten detections a scan spread over a 100 m x 20 m ellipse whose
+    major axis is at 20° from +x (counter-clockwise), moving east-north-east at 8.5 m/s."""
+    import numpy as np
+
+    rng = np.random.default_rng(seed)
+    angle = np.radians(20.0)
+    rot = np.array([[np.cos(angle), -np.sin(angle)], [np.sin(angle), np.cos(angle)]])
+    batches = []
+    for k in range(n):
+        centre = np.array([1000.0 + 8.0 * k, 500.0 + 3.0 * k])
+        pts = centre + (rng.uniform(-1.0, 1.0, (10, 2)) * [50.0, 10.0]) @ rot.T
+        batches.append(
+            {
+                "sensor_id": "radar-1",
+                "time": float(k),
+                "detections": [
+                    {"x": float(x), "y": float(y), "id": f"d{k}-{i}"}
+                    for i, (x, y) in enumerate(pts)
+                ],
+                "cov": [[4.0, 0.0], [0.0, 4.0]],
+                "pd": 0.9,
+                "clutter_density": 1e-6,
+            }
+        )
+    return batches
+
+
+def test_the_view_draws_an_extended_track_and_its_details(service: RunningService) -> None:
+    import math
+
+    from selenium.webdriver.common.action_chains import ActionChains
+    from selenium.webdriver.common.by import By
+
+    driver = _driver()
+    try:
+        driver.get(service.url + "/view")
+        # scan by scan until the tracker confirms an extended track for the cluster
+        served: list[dict[str, Any]] = []
+        fed = 0
+        with httpx.Client(base_url=service.url, timeout=10) as http:
+            for batch in _cluster_batches(MAX_CLUSTER_SCANS):
+                assert http.post("/api/v1/detections", json=batch).status_code == 202
+                fed += 1
+                wait_until(lambda n=fed: service.engine.seq == n, timeout=30, what="tracked")
+                served = http.get("/api/v1/tracks", params={"kind": "extended"}).json()["tracks"]
+                if served:
+                    break
+        assert served, f"no confirmed extended track after {fed} scans"
+        track = served[0]
+        assert track["kind"] == "extended" and track["status"] == "confirmed"
+
+        def state() -> dict[str, Any]:
+            return driver.execute_script("return window.viewState || {}") or {}
+
+        wait_until(lambda: state().get("seq") == fed, timeout=30, what="the last frame")
+        view = state()
+        drawn = next(t for t in view["tracks"] if t["id"] == track["id"])
+        assert drawn["kind"] == "extended" and drawn["rx"] > drawn["ry"] > 0
+        # north up: the canvas turns the ellipse clockwise by the world's counter-clockwise angle
+        assert math.isclose(drawn["rotation"], -track["extent"]["orientation"], abs_tol=1e-9)
+        listed = driver.find_element(
+            By.CSS_SELECTOR, f'#track-list li[data-track-id="{track["id"]}"]'
+        )
+        assert listed.get_attribute("data-kind") == "extended"
+
+        # click inside the ellipse, along its major axis, away from any other track's dot:
+        # computed in world coordinates, so a wrong rotation would miss the ellipse
+        def to_screen(x: float, y: float) -> tuple[float, float]:
+            return view["offsetX"] + x * view["scale"], view["offsetY"] - y * view["scale"]
+
+        major, _ = track["extent"]["semi_axes"]
+        angle = track["extent"]["orientation"]
+        others = [t for t in view["tracks"] if t["id"] != track["id"]]
+        spots = [
+            to_screen(
+                track["position"][0] + f * major * math.cos(angle),
+                track["position"][1] + f * major * math.sin(angle),
+            )
+            for f in (0.6, -0.6, 0.45, -0.45, 0.75, -0.75, 0.3, -0.3)
+        ]
+        px, py = next(
+            (
+                (sx, sy)
+                for sx, sy in spots
+                if all(math.hypot(t["sx"] - sx, t["sy"] - sy) > 16 for t in others)
+            ),
+            (drawn["sx"], drawn["sy"]),
+        )
+        canvas = driver.find_element(By.ID, "plan")
+        w, h = canvas.size["width"], canvas.size["height"]
+        ActionChains(driver).move_to_element_with_offset(
+            canvas, int(px - w / 2), int(py - h / 2)
+        ).click().perform()
+        details = driver.find_element(By.ID, "details")
+        wait_until(lambda: details.is_displayed(), timeout=10, what="the details panel")
+        assert details.get_attribute("data-track-id") == track["id"]
+        fields = {
+            dd.get_attribute("data-field"): dd.text
+            for dd in details.find_elements(By.CSS_SELECTOR, "dd[data-field]")
+        }
+        latest = next(t for t in state_tracks(service) if t["id"] == track["id"])
+        assert fields["kind"] == "extended" and fields["id"] == track["id"]
+        assert fields["status"] == "confirmed"
+        assert fields["position"] == "{:.1f}, {:.1f} m".format(*latest["position"])
+        assert fields["semi-axes"] == "{:.1f}, {:.1f} m".format(*latest["extent"]["semi_axes"])
+        assert fields["orientation"] == "{:.1f}°".format(
+            math.degrees(latest["extent"]["orientation"])
+        )
+        assert fields["detections"] == str(len(latest["detection_ids"]))
+        assert {"velocity", "score", "hits"} <= set(fields)
+        ARTIFACTS.mkdir(exist_ok=True)
+        assert driver.save_screenshot(str(ARTIFACTS / "view-extended.png"))
+    finally:
+        driver.quit()
+
+
+def state_tracks(service: RunningService) -> list[dict[str, Any]]:
+    """The service's latest confirmed tracks."""
+    return httpx.get(service.url + "/api/v1/tracks").json()["tracks"]

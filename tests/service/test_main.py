@@ -5,8 +5,11 @@ from __future__ import annotations
 
 import sys
 
+import pytest
+
+from clients.demo import SCENARIOS, build_parser
 from service.main import demo_command
-from service.settings import Settings
+from service.settings import DEMO_SCENARIOS, Settings, load_settings
 
 
 def _command(**settings: object) -> list[str] | None:
@@ -49,3 +52,38 @@ def test_a_client_service_shares_its_router_with_the_demo() -> None:
 def test_no_endpoint_no_demo() -> None:
     assert _command(zenoh_listen="none") is None
     assert _command(zenoh_mode="client", zenoh_listen="tcp/127.0.0.1:7447") is None
+
+
+@pytest.mark.parametrize(
+    ("argv", "scenario"),
+    [
+        (["--demo"], "continuous"),
+        (["--demo", "convoy"], "convoy"),
+        (["--demo", "harbour", "--log-level", "warning"], "harbour"),
+        (["--demo-scenario", "convoy", "--demo"], "convoy"),
+    ],
+)
+def test_demo_takes_a_scenario(argv: list[str], scenario: str) -> None:
+    settings = load_settings(argv)
+    assert settings.demo is True and settings.demo_scenario == scenario
+    command = demo_command(settings)
+    assert command is not None
+    if scenario == "continuous":  # as before: the client's default scenario
+        assert "--scenario" not in command
+    else:
+        assert command[command.index("--scenario") + 1] == scenario
+    assert "--speed" not in command
+    # the demo client takes the command line it is given
+    args = build_parser().parse_args(command[3:])
+    assert args.scenario == scenario and args.exit_with_parent
+
+
+def test_demo_scenarios_and_speed() -> None:
+    assert DEMO_SCENARIOS == SCENARIOS
+    assert load_settings([]).demo is False
+    assert load_settings(["--no-demo"]).demo is False
+    assert Settings(demo="convoy").demo_scenario == "convoy"  # type: ignore[arg-type]
+    command = demo_command(load_settings(["--demo", "convoy", "--demo-speed", "5"]))
+    assert command is not None and command[-4:] == ["--scenario", "convoy", "--speed", "5.0"]
+    with pytest.raises(SystemExit):
+        load_settings(["--demo", "airshow"])

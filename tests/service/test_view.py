@@ -76,6 +76,21 @@ def test_view_files_are_served(service: RunningService) -> None:
         assert http.get("/view/assets/missing.js").status_code == 404
 
 
+def test_view_draws_extended_tracks(service: RunningService) -> None:
+    """The view has a drawing code path for extended tracks: their extent ellipse (turned
+    for the canvas's downward y axis), picking inside it, their details and a legend key."""
+    with httpx.Client(base_url=service.url, timeout=10) as http:
+        js = http.get("/view/assets/view.js").text
+        html = http.get("/view").text
+    kinds = re.search(r"const DRAW_KIND = \{([^}]*)\}", js)
+    assert kinds is not None and "extended: drawExtended" in kinds.group(1)
+    assert "function drawExtended(" in js and "ctx.ellipse(" in js
+    assert "rotation: -axes.angle" in js  # world angles are counter-clockwise, north up
+    assert "semi_axes" in js and "orientation" in js and "detection_ids" in js
+    assert "insideEllipse(" in js  # a click inside the ellipse selects the track
+    assert 'data-kind="extended"' in html  # the legend
+
+
 def test_stream_delivers_a_frame_per_processed_batch(service: RunningService) -> None:
     engine = service.engine
     with (

@@ -1,0 +1,48 @@
+"""Resolution-distance subsets and their nested unions (trackers/extended/partition.py)."""
+
+import numpy as np
+import pytest
+
+from trackers.extended.partition import nested_unions, resolution_subsets
+
+
+def test_chains_closer_than_the_resolution_distance_are_one_subset():
+    Z = np.array([[0, 0], [90, 0], [180, 0], [500, 0], [590, 0], [2000, 0]], dtype=float)
+    subsets = resolution_subsets(Z, 100.0)
+    assert [s.tolist() for s in subsets] == [[0, 1, 2], [3, 4], [5]]
+
+
+def test_empty_single_and_all_apart():
+    assert resolution_subsets(np.zeros((0, 2)), 10.0) == []
+    assert [s.tolist() for s in resolution_subsets(np.array([[1.0, 2.0]]), 10.0)] == [[0]]
+    Z = np.array([[0, 0], [0, 50], [50, 0]], dtype=float)
+    assert [s.tolist() for s in resolution_subsets(Z, 10.0)] == [[0], [1], [2]]
+
+
+def test_subsets_cover_every_point_once_in_a_large_random_scan():
+    rng = np.random.default_rng(3)
+    Z = rng.uniform(0, 10_000, size=(3000, 2))
+    subsets = resolution_subsets(Z, 150.0)
+    rows = np.sort(np.concatenate(subsets))
+    assert rows.tolist() == list(range(3000))
+    # no two points of different subsets are closer than the resolution distance
+    label = np.empty(3000, dtype=int)
+    for k, s in enumerate(subsets):
+        label[s] = k
+    from scipy.spatial import cKDTree
+
+    pairs = cKDTree(Z).query_pairs(149.9, output_type="ndarray")
+    assert (label[pairs[:, 0]] == label[pairs[:, 1]]).all()
+
+
+def test_nested_unions_add_the_best_fitting_subsets_first():
+    subsets = [np.array([0, 1]), np.array([2]), np.array([3, 4])]
+    unions = nested_unions(subsets, np.array([5.0, 9.0, 1.0]))
+    assert [u.tolist() for u in unions] == [[3, 4], [0, 1, 3, 4], [0, 1, 2, 3, 4]]
+
+
+def test_bad_resolution_distance_and_fit_count():
+    with pytest.raises(ValueError, match="d_res"):
+        resolution_subsets(np.zeros((2, 2)), 0.0)
+    with pytest.raises(ValueError, match="one fit"):
+        nested_unions([np.array([0])], np.array([1.0, 2.0]))

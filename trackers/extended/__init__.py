@@ -1,0 +1,1 @@
+"""Extended objects and groups: random-matrix tracks (paper 002)."""

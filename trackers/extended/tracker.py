@@ -1,0 +1,708 @@
+"""The extended-object tracker: a peer of the individual tracker (paper 002).
+
+Each scan (:meth:`ExtendedTracker.propose`, then :meth:`~ExtendedTracker.commit`):
+
+1. **Predict** every extended track to the scan's time (random matrix, :mod:`.random_matrix`).
+2. **Leave the individual targets theirs.** A detection inside the 99 % gate of a confirmed
+   individual track that does not move with the extended track (velocities more than
+   ``group_speed_spread`` apart, beyond their uncertainty) is left to that track: a vehicle
+   overtaking a convoy keeps its detections.
+3. **Gate and partition.** The other detections in the track's gate (``H P Hᵀ + z X + R``,
+   chi-square, ``gate_probability``) are split into subsets by the resolution distance
+   (:mod:`.partition`); the nested unions of the subsets, best-fitting first, are scored by
+
+       ΔL(W) = ln Poisson(|W|; γ) + ln f(W) − |W| ln λ_fa
+
+   (``f`` the joint density of the detections under the predicted centroid and extent,
+   ``γ`` the track's expected number of detections a scan, ``λ_fa`` the false-alarm density),
+   against ``ΔL(∅) = −γ`` for no detection at all. The likeliest is the track's: its
+   detections are *claimed* (they update no individual track and start none) and update the
+   centroid and extent. ``L ← L + ΔL`` is the track's score, tested like an individual
+   track's (paper 002 eq. 28-30; Wald's test with the thresholds of ``track_management``).
+4. **Split.** A subset of at least two detections in the gate that the likeliest union leaves
+   out for :data:`SPLIT_SCANS` scans in a row starts a new extended track (a convoy
+   separating); it inherits the parent's velocity and status.
+5. **Hybridization.** Every individual track predicted inside a confirmed extended track's
+   *resolution cell* (its extent ellipse with each semi-axis grown by half the resolution
+   distance) gets detection probability ``in_cell_pd``, so its score follows eq. 28-30 with
+   it; individual tracks inside the extent that move with the extended track are absorbed:
+   taken from the individual tracker and reported deleted.
+6. **Birth.** Detections claimed by no extended track form clusters (resolution distance).
+   A cluster of at least ``min_detections`` detections that are either explained by no
+   confirmed individual track or by confirmed tracks moving together, seen in
+   ``birth_scans`` scans in a row spanning at least :data:`BIRTH_MIN_SPAN` seconds and moving
+   at no more than ``max_speed``, starts a tentative extended track.
+
+Tracks can also be started by hand (:meth:`ExtendedTracker.start`), from a centroid,
+velocity and extent prior; such a track is confirmed at once.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from trackers.config import ExtendedConfig, TrackerConfig, TrackManagementConfig
+from trackers.extended.partition import nested_unions, resolution_subsets
+from trackers.extended.random_matrix import (
+    ExtendedEstimate,
+    gate_covariance,
+    predict,
+    subset_log_likelihood,
+    update,
+)
+from trackers.peers import PeerProposal, PointTrackView, ResolutionCell
+from trackers.scoring import initial_score
+from trackers.types import Extent, Scan, TrackSnapshot
+
+__all__ = [
+    "BIRTH_MIN_SPAN",
+    "SPLIT_SCANS",
+    "ExtendedTrack",
+    "ExtendedTracker",
+    "extent_ellipse",
+    "snapshot_of",
+]
+
+#: Scans in a row a separated subset must be left out before it becomes a track of its own.
+SPLIT_SCANS = 2
+#: Shortest time (s) over which a cluster must be seen before it starts a track: at a fast
+#: revisit, independent targets that happen to be close look like a group for a few scans.
+BIRTH_MIN_SPAN = 10.0
+#: Gate (χ²₂, 99 %) of a confirmed individual track that keeps its detections for it.
+POINT_GATE = 9.21
+#: Weight of the latest scan's detection count in the expected count γ.
+GAMMA_GAIN = 0.2
+#: Smallest expected detection count: keeps ln Poisson finite and a miss's cost positive.
+MIN_GAMMA = 0.3
+#: Velocity std (m/s) per axis of a new track's centroid beyond what its birth measured.
+BIRTH_VELOCITY_STD = 5.0
+#: Velocity std (m/s) per axis of a track split off another: measured from the centroid of a
+#: few detections over one scan.
+SPLIT_VELOCITY_STD = 10.0
+
+
+@dataclass(frozen=True, eq=False)
+class ExtendedTrack:
+    """One extended track as of ``time`` (immutable)."""
+
+    id: str
+    estimate: ExtendedEstimate
+    time: float
+    score: float
+    peak: float
+    hits: int
+    confirmed: bool
+    created: float
+    updated: float
+    gamma: float
+    detection_ids: tuple[str, ...] = ()
+    #: Scans in a row that a subset left out of the track's detections has been seen outside
+    #: its extent and moving away from it, with that subset's last centroid, its distance in
+    #: extent radii and the time.
+    split_evidence: int = 0
+    split_centroid: tuple[float, float] = (0.0, 0.0)
+    split_radius: float = 0.0
+    split_time: float = 0.0
+
+
+@dataclass(frozen=True, eq=False)
+class _Candidate:
+    """A cluster seen in consecutive scans, not yet a track."""
+
+    centroid: np.ndarray
+    velocity: np.ndarray
+    first_time: float
+    time: float
+    seen: int
+
+
+@dataclass(frozen=True, eq=False)
+class _State:
+    config: ExtendedConfig
+    management: TrackManagementConfig
+    tracks: tuple[ExtendedTrack, ...] = ()
+    candidates: tuple[_Candidate, ...] = ()
+    next_id: int = 1
+    time: float | None = None
+
+
+def extent_ellipse(X: np.ndarray) -> Extent:
+    """Semi-axes (major first, m) and orientation (rad, of the major axis, in (−π/2, π/2]) of
+    the ellipse ``pᵀ X⁻¹ p ≤ 1``: the square roots of X's eigenvalues and its major
+    eigenvector's angle."""
+    X = np.asarray(X, dtype=float)
+    a, b, c = X[0, 0], X[0, 1], X[1, 1]
+    mean, half = 0.5 * (a + c), math.hypot(0.5 * (a - c), b)
+    l1, l2 = mean + half, max(mean - half, 0.0)
+    theta = 0.5 * math.atan2(2.0 * b, a - c)
+    return Extent(matrix=X.copy(), semi_axes=(math.sqrt(l1), math.sqrt(l2)), orientation=theta)
+
+
+def _grown(X: np.ndarray, margin: float) -> np.ndarray:
+    """The shape matrix of the ellipse ``pᵀ X⁻¹ p ≤ 1`` with each semi-axis longer by
+    ``margin``: ``V diag((√λᵢ + m)²) Vᵀ``."""
+    w, V = np.linalg.eigh(X)
+    return (V * (np.sqrt(np.maximum(w, 0.0)) + margin) ** 2) @ V.T
+
+
+def _log_poisson(n: int, gamma: float) -> float:
+    """ln Poisson(n; γ) = n ln γ − γ − ln n!."""
+    return n * math.log(gamma) - gamma - math.lgamma(n + 1)
+
+
+def _mahalanobis(d: np.ndarray, S: np.ndarray) -> np.ndarray:
+    """``dᵢᵀ Sᵢ⁻¹ dᵢ`` for ``d (n, 2)`` and ``S (n, 2, 2)`` or ``(2, 2)``, 2x2 written out."""
+    S = np.broadcast_to(S, (d.shape[0], 2, 2))
+    a, b, c = S[:, 0, 0], S[:, 0, 1], S[:, 1, 1]
+    det = a * c - b * b
+    x, y = d[:, 0], d[:, 1]
+    return (c * x * x - 2.0 * b * x * y + a * y * y) / det
+
+
+class _PointGates:
+    """Which confirmed individual tracks have a detection in their 99 % gate."""
+
+    def __init__(self, view: PointTrackView, scan: Scan) -> None:
+        self.rows = np.flatnonzero(view.confirmed)
+        self.xy = view.x[self.rows, :2]
+        self.v = view.x[self.rows, 2:4]
+        self.Pp = view.P[self.rows, :2, :2]
+        self.Pv = view.P[self.rows, 2:4, 2:4]
+        self.ids = [view.ids[i] for i in self.rows.tolist()]
+        self._scan = scan
+        self._tree = cKDTree(self.xy) if self.rows.size else None
+        if self.rows.size:
+            spread = np.max(np.linalg.eigvalsh(self.Pp)[:, -1])
+            r_max = float(np.max(np.linalg.eigvalsh(scan.R)[:, -1])) if scan.size else 0.0
+            self._radius = math.sqrt(POINT_GATE * (spread + r_max))
+
+    def tracks_of(self, det: np.ndarray) -> list[np.ndarray]:
+        """For each detection row in ``det``, the indices (into the confirmed tracks) whose
+        gate holds it."""
+        if self._tree is None or det.size == 0:
+            return [np.zeros(0, dtype=np.intp) for _ in range(det.size)]
+        z = self._scan.z[det]
+        near = self._tree.query_ball_point(z, self._radius)
+        out = []
+        for k, cand in enumerate(near):
+            if not cand:
+                out.append(np.zeros(0, dtype=np.intp))
+                continue
+            j = np.asarray(cand, dtype=np.intp)
+            d = z[k] - self.xy[j]
+            m = _mahalanobis(d, self.Pp[j] + self._scan.R[det[k]])
+            out.append(j[m <= POINT_GATE])
+        return out
+
+
+def _moves_with(
+    v: np.ndarray,
+    Pv: np.ndarray,
+    ve: np.ndarray,
+    Pve: np.ndarray,
+    spread: float,
+    sigmas: float | np.ndarray = 1.0,
+) -> np.ndarray:
+    """Whether velocities ``v (n, 2)`` are within ``spread`` (m/s) of ``ve``, allowing
+    ``sigmas`` standard deviations of both estimates."""
+    sd = np.sqrt(0.5 * (np.trace(Pv, axis1=1, axis2=2) + np.trace(Pve)))
+    return np.hypot(*(v - ve).T) <= spread + sigmas * sd
+
+
+class ExtendedTracker:
+    """Random-matrix tracks of extended objects and groups; a peer of the point tracker
+    (:class:`trackers.peers.PeerTracker`). See the module docstring for the step."""
+
+    kind = "extended"
+
+    def __init__(self, config: TrackerConfig | None = None) -> None:
+        config = config or TrackerConfig()
+        self._state = _State(config=config.extended, management=config.track_management)
+
+    # -- the peer interface ------------------------------------------------------------------
+
+    @property
+    def tracks(self) -> tuple[ExtendedTrack, ...]:
+        return self._state.tracks
+
+    def reconfigure(self, config: TrackerConfig) -> None:
+        self._state = replace(
+            self._state, config=config.extended, management=config.track_management
+        )
+
+    def commit(self, proposal: PeerProposal) -> None:
+        if isinstance(proposal.state, _State):
+            self._state = proposal.state
+
+    def snapshot(self) -> tuple[TrackSnapshot, ...]:
+        return tuple(_snapshot(t, t.time) for t in self._state.tracks)
+
+    def start(
+        self,
+        time: float,
+        position: np.ndarray,
+        velocity: np.ndarray,
+        extent: np.ndarray,
+        position_std: float = 20.0,
+        velocity_std: float = 5.0,
+        expected_detections: float = 3.0,
+    ) -> ExtendedTrack:
+        """Start a confirmed extended track by hand at ``time`` (not before the last scan), from
+        a centroid, velocity and extent prior (``extent`` the 2x2 shape matrix, m²). Returns
+        it; raises ``ValueError`` for unusable values and changes nothing then."""
+        state = self._state
+        if not math.isfinite(time) or (state.time is not None and time < state.time):
+            raise ValueError(f"time: must be finite and not before {state.time}, got {time!r}")
+        for name, v in (
+            ("position_std", position_std),
+            ("velocity_std", velocity_std),
+            ("expected_detections", expected_detections),
+        ):
+            if not (math.isfinite(v) and v > 0):
+                raise ValueError(f"{name}: must be a finite number > 0, got {v!r}")
+        x = np.concatenate([np.reshape(position, 2), np.reshape(velocity, 2)]).astype(float)
+        if not np.isfinite(x).all():
+            raise ValueError("position and velocity: must be finite numbers")
+        X = np.asarray(extent, dtype=float).reshape(2, 2)
+        if not (
+            np.isfinite(X).all()
+            and abs(X[0, 1] - X[1, 0]) <= 1e-9 * (abs(X[0, 0]) + abs(X[1, 1]))
+            and X[0, 0] > 0
+            and X[0, 0] * X[1, 1] - X[0, 1] * X[1, 0] > 0
+        ):
+            raise ValueError("extent: must be a symmetric positive definite 2x2 matrix")
+        P = np.diag([position_std**2] * 2 + [velocity_std**2] * 2)
+        est = ExtendedEstimate(x=x, P=P, X=X, alpha=10.0)
+        track = ExtendedTrack(
+            id=f"E{state.next_id}",
+            estimate=est,
+            time=float(time),
+            score=state.management.confirm_threshold,
+            peak=state.management.confirm_threshold,
+            hits=0,
+            confirmed=True,
+            created=float(time),
+            updated=float(time),
+            gamma=float(expected_detections),
+        )
+        self._state = replace(state, tracks=(*state.tracks, track), next_id=state.next_id + 1)
+        return track
+
+    def propose(self, scan: Scan, view: PointTrackView) -> PeerProposal:
+        state = self._state
+        cfg, tm = state.config, state.management
+        t = float(scan.time)
+        claimed = np.zeros(scan.size, dtype=bool)
+        if not cfg.enabled:
+            gone = tuple(tr.id for tr in state.tracks if tr.confirmed)
+            new_state = replace(state, tracks=(), candidates=(), time=t)
+            return PeerProposal(claimed=claimed, deleted=gone, state=new_state)
+        lam = tm.clutter_density if scan.clutter_density is None else float(scan.clutter_density)
+        log_lam = math.log(lam)
+        next_id = state.next_id
+        gates: _PointGates | None = None
+
+        def point_gates() -> _PointGates:
+            nonlocal gates
+            if gates is None:
+                gates = _PointGates(view, scan)
+            return gates
+
+        tree = cKDTree(scan.z) if scan.size else None
+        R_all = scan.R
+        kept: list[ExtendedTrack] = []
+        spawned: list[ExtendedTrack] = []
+        deleted: list[str] = []
+        cells: list[ResolutionCell] = []
+        take: set[str] = set()
+        for track in state.tracks:
+            dt = max(0.0, t - track.time)
+            est = predict(track.estimate, dt, cfg.q, cfg.tau)
+            c, v = est.x[:2], est.x[2:4]
+            rows = np.zeros(0, dtype=np.intp)
+            if tree is not None:
+                G = gate_covariance(est, np.mean(R_all, axis=0), cfg.z_scale)
+                radius = math.sqrt(cfg.gate_threshold * float(np.linalg.eigvalsh(G)[-1]))
+                near = np.asarray(tree.query_ball_point(c, radius * 1.5), dtype=np.intp)
+                near = near[~claimed[near]]
+                if near.size:
+                    Gj = G - np.mean(R_all, axis=0) + R_all[near]
+                    near = near[_mahalanobis(scan.z[near] - c, Gj) <= cfg.gate_threshold]
+                rows = near
+            if rows.size:  # detections of individual targets that do not move with it
+                pg = point_gates()
+                if pg.rows.size:
+                    keep = np.ones(rows.size, dtype=bool)
+                    for k, js in enumerate(pg.tracks_of(rows)):
+                        if (
+                            js.size
+                            and not _moves_with(
+                                pg.v[js], pg.Pv[js], v, est.P[2:4, 2:4], cfg.group_speed_spread, 0.0
+                            ).all()
+                        ):
+                            keep[k] = False
+                    rows = rows[keep]
+            chosen = np.zeros(0, dtype=np.intp)
+            left_out: list[np.ndarray] = []
+            gain = -track.gamma  # ΔL(∅)
+            if rows.size:
+                subsets = resolution_subsets(scan.z[rows], cfg.resolution_distance)
+                G1 = gate_covariance(est, np.mean(R_all[rows], axis=0), cfg.z_scale)
+                fit = []
+                for s in subsets:
+                    d = scan.z[rows[s]].mean(axis=0) - c
+                    fit.append(float(_mahalanobis(d[None], G1 / max(1, s.size) ** 0.5)[0]))
+                best = None
+                for cand in nested_unions(subsets, np.asarray(fit)):
+                    W = rows[cand]
+                    Rm = np.mean(R_all[W], axis=0)
+                    g = (
+                        _log_poisson(W.size, track.gamma)
+                        + subset_log_likelihood(est, scan.z[W], Rm, cfg.z_scale)
+                        - W.size * log_lam
+                    )
+                    if g > gain:
+                        gain, best = g, cand
+                if best is not None:
+                    chosen = rows[best]
+                    in_best = np.zeros(rows.size, dtype=bool)
+                    in_best[best] = True
+                    left_out = [rows[s] for s in subsets if not in_best[s].any() and s.size >= 2]
+            score = track.score + gain
+            n = int(chosen.size)
+            gamma = max(MIN_GAMMA, track.gamma + GAMMA_GAIN * (n - track.gamma))
+            if n:
+                claimed[chosen] = True
+                est = update(est, scan.z[chosen], np.mean(R_all[chosen], axis=0), cfg.z_scale)
+            evidence, split_rows, split_c, split_m, split_v = _split_evidence(
+                track, est, scan, left_out, t, cfg
+            )
+            new = ExtendedTrack(
+                id=track.id,
+                estimate=est,
+                time=t,
+                score=score,
+                peak=max(track.peak, score),
+                hits=track.hits + (1 if n else 0),
+                confirmed=track.confirmed or score >= tm.confirm_threshold,
+                created=track.created,
+                updated=t if n else track.updated,
+                gamma=gamma,
+                detection_ids=_ids(scan, chosen),
+                split_evidence=0 if evidence >= SPLIT_SCANS else evidence,
+                split_centroid=split_c,
+                split_radius=split_m,
+                split_time=t,
+            )
+            if evidence >= SPLIT_SCANS and not claimed[split_rows].any():
+                claimed[split_rows] = True
+                child = _born(
+                    f"E{next_id}",
+                    scan,
+                    split_rows,
+                    split_v,
+                    new.confirmed,
+                    tm.confirm_threshold if new.confirmed else new.score,
+                    float(split_rows.size),
+                    cfg,
+                    tm,
+                    velocity_std=SPLIT_VELOCITY_STD,
+                )
+                spawned.append(child)
+                next_id += 1
+            if _dead(new, t, cfg, tm):
+                if new.confirmed:
+                    deleted.append(new.id)
+                continue
+            kept.append(new)
+        kept, merged = _merge(kept + spawned, cfg)
+        spawned = []
+        deleted.extend(merged)
+        # Hybridization: resolution cells and absorbed individual tracks.
+        if len(view):
+            xy, vel = view.x[:, :2], view.x[:, 2:4]
+            for track in kept:
+                if not track.confirmed:
+                    continue
+                est = track.estimate
+                established = track.hits >= cfg.birth_scans and t - track.created >= BIRTH_MIN_SPAN
+                cells.append(
+                    ResolutionCell(
+                        center=est.x[:2],
+                        matrix=_grown(est.X, 0.5 * cfg.resolution_distance),
+                        pd=cfg.in_cell_pd,
+                    )
+                )
+                d = xy - est.x[:2]
+                inside = _mahalanobis(d, est.X) <= 1.0
+                if established and inside.any():
+                    idx = np.flatnonzero(inside)
+                    # a confirmed track must move with it within the spread itself; a
+                    # tentative one within its uncertainty too
+                    sigmas = np.where(view.confirmed[idx], 0.0, 1.0)
+                    moving = _moves_with(
+                        vel[idx],
+                        view.P[idx, 2:4, 2:4],
+                        est.x[2:4],
+                        est.P[2:4, 2:4],
+                        cfg.group_speed_spread,
+                        sigmas,
+                    )
+                    take.update(view.ids[i] for i in idx[moving].tolist())
+        absorbed = tuple(sorted(take))
+        index = view.index()
+        gone = tuple(tid for tid in absorbed if view.confirmed[index[tid]])
+        # Births from clusters no extended track explains.
+        born, candidates, next_id = self._births(scan, claimed, point_gates, state, next_id, t)
+        for _, rows in born:
+            claimed[rows] = True
+        tracks = tuple(kept) + tuple(spawned) + tuple(track for track, _ in born)
+        new_state = replace(state, tracks=tracks, candidates=candidates, next_id=next_id, time=t)
+        return PeerProposal(
+            claimed=claimed,
+            cells=tuple(cells),
+            take=absorbed,
+            tracks=tuple(_snapshot(tr, t) for tr in tracks),
+            deleted=tuple(deleted) + gone,
+            state=new_state,
+        )
+
+    # -- births --------------------------------------------------------------------------------
+
+    def _births(self, scan, claimed, point_gates, state, next_id, t):
+        cfg, tm = state.config, state.management
+        free = np.flatnonzero(~claimed)
+        clusters: list[np.ndarray] = []
+        if free.size >= cfg.min_detections:
+            for s in resolution_subsets(scan.z[free], cfg.resolution_distance):
+                if s.size < cfg.min_detections:
+                    continue
+                rows = free[s]
+                rows = _group_rows(rows, point_gates(), cfg)
+                if rows.size >= cfg.min_detections:
+                    clusters.append(rows)
+        centroids = np.array([scan.z[r].mean(axis=0) for r in clusters]).reshape(-1, 2)
+        used = np.zeros(len(clusters), dtype=bool)
+        candidates: list[_Candidate] = []
+        born: list[tuple[ExtendedTrack, np.ndarray]] = []
+        for cand in state.candidates:
+            dt = t - cand.time
+            if dt <= 0 or not clusters:
+                if dt <= 0:
+                    candidates.append(cand)
+                continue
+            pred = cand.centroid + dt * cand.velocity
+            reach = cfg.resolution_distance + (
+                cfg.max_speed * dt if cand.seen == 1 else 2.0 * cfg.group_speed_spread * dt
+            )
+            d = np.hypot(*(centroids - pred).T)
+            d[used] = np.inf
+            k = int(np.argmin(d))
+            if d[k] > reach:
+                continue  # not seen this scan: the run is broken
+            used[k] = True
+            velocity = (centroids[k] - cand.centroid) / dt
+            if np.hypot(*velocity) > cfg.max_speed:
+                continue
+            if cand.seen > 1:
+                velocity = 0.5 * (velocity + cand.velocity)
+            seen = cand.seen + 1
+            if seen >= cfg.birth_scans and t - cand.first_time >= BIRTH_MIN_SPAN:
+                track = _born(
+                    f"E{next_id}",
+                    scan,
+                    clusters[k],
+                    velocity,
+                    False,
+                    initial_score(tm.new_target_density, tm.clutter_density),
+                    float(clusters[k].size),
+                    cfg,
+                    tm,
+                )
+                born.append((track, clusters[k]))
+                next_id += 1
+            else:
+                candidates.append(_Candidate(centroids[k], velocity, cand.first_time, t, seen))
+        for k in np.flatnonzero(~used).tolist():
+            candidates.append(_Candidate(centroids[k], np.zeros(2), t, t, 1))
+        return born, tuple(candidates), next_id
+
+
+def _group_rows(rows: np.ndarray, pg: _PointGates, cfg: ExtendedConfig) -> np.ndarray:
+    """The detections of a cluster that a group may hold: those no confirmed individual track
+    explains, and those of confirmed tracks that move together (within
+    ``group_speed_spread`` of their median velocity)."""
+    if not pg.rows.size:
+        return rows
+    owners = pg.tracks_of(rows)
+    explained = np.array([o.size > 0 for o in owners])
+    if not explained.any():
+        return rows
+    js = np.unique(np.concatenate([o for o in owners if o.size]))
+    v = pg.v[js]
+    median = np.median(v, axis=0)
+    together = set(js[np.hypot(*(v - median).T) <= cfg.group_speed_spread].tolist())
+    if len(together) < 2:
+        together = set()
+    keep = [not e or set(o.tolist()) <= together for e, o in zip(explained, owners, strict=True)]
+    return rows[np.asarray(keep, dtype=bool)]
+
+
+def _split_evidence(
+    track: ExtendedTrack,
+    est: ExtendedEstimate,
+    scan: Scan,
+    left_out: list[np.ndarray],
+    t: float,
+    cfg: ExtendedConfig,
+) -> tuple[int, np.ndarray, tuple[float, float], float, np.ndarray]:
+    """The split evidence after this scan: of the subsets left out of the track's detections,
+    the one farthest outside its extent, in extent radii ``m = √((c_s − c)ᵀ X⁻¹ (c_s − c))``;
+    the evidence grows when it is outside (``m > 1``) and farther than the subset seen at the
+    previous scan (a group moving away, not a column bending round a corner). Returns the
+    evidence, the subset's rows, its centroid, ``m`` and its velocity from the two scans."""
+    none = (0, np.zeros(0, dtype=np.intp), (0.0, 0.0), 0.0, np.zeros(2))
+    if not left_out:
+        return none
+    c = est.x[:2]
+    Xinv = np.linalg.inv(est.X)
+    best, best_m, best_c = None, 1.0, None
+    for rows in left_out:
+        cs = scan.z[rows].mean(axis=0)
+        d = cs - c
+        m = math.sqrt(max(0.0, float(d @ Xinv @ d)))
+        if m > best_m:
+            best, best_m, best_c = rows, m, cs
+    if best is None or best_c is None:
+        return none
+    evidence, velocity = 1, est.x[2:4].copy()
+    dt = t - track.split_time
+    if track.split_evidence and dt > 0:
+        prev = np.asarray(track.split_centroid)
+        moved = float(np.hypot(*(best_c - prev)))
+        if best_m > track.split_radius and moved <= cfg.resolution_distance + cfg.max_speed * dt:
+            evidence = track.split_evidence + 1
+            velocity = (best_c - prev) / dt
+    return evidence, best, (float(best_c[0]), float(best_c[1])), best_m, velocity
+
+
+def _merge(
+    tracks: list[ExtendedTrack], cfg: ExtendedConfig
+) -> tuple[list[ExtendedTrack], list[str]]:
+    """Tracks that have become one: where a track's centroid lies inside another's extent
+    (grown by half the resolution distance) and both move alike, the one with fewer hits goes.
+    Returns the tracks kept and the ids of confirmed tracks removed."""
+    if len(tracks) < 2:
+        return tracks, []
+    gone: set[int] = set()
+    order = sorted(range(len(tracks)), key=lambda i: (-tracks[i].hits, tracks[i].created))
+    for a_pos, a in enumerate(order):
+        if a in gone:
+            continue
+        ea = tracks[a].estimate
+        M = _grown(ea.X, 0.5 * cfg.resolution_distance)
+        for b in order[a_pos + 1 :]:
+            if b in gone:
+                continue
+            eb = tracks[b].estimate
+            d = eb.x[:2] - ea.x[:2]
+            if _mahalanobis(d[None], M)[0] > 1.0:
+                continue
+            if _moves_with(
+                eb.x[None, 2:4],
+                eb.P[None, 2:4, 2:4],
+                ea.x[2:4],
+                ea.P[2:4, 2:4],
+                cfg.group_speed_spread,
+            )[0]:
+                gone.add(b)
+    kept = [tr for i, tr in enumerate(tracks) if i not in gone]
+    return kept, [tracks[i].id for i in sorted(gone) if tracks[i].confirmed]
+
+
+def _born(
+    track_id: str,
+    scan: Scan,
+    rows: np.ndarray,
+    velocity: np.ndarray,
+    confirmed: bool,
+    score: float,
+    gamma: float,
+    cfg: ExtendedConfig,
+    tm: TrackManagementConfig,
+    velocity_std: float = BIRTH_VELOCITY_STD,
+) -> ExtendedTrack:
+    """A new track from the detections ``rows`` of ``scan`` moving at ``velocity``."""
+    Z = scan.z[rows]
+    n = Z.shape[0]
+    Rm = np.mean(scan.R[rows], axis=0)
+    c = Z.mean(axis=0)
+    spread = (Z - c).T @ (Z - c) / max(1, n - 1)
+    X = (spread - Rm) / cfg.z_scale
+    w, V = np.linalg.eigh(0.5 * (X + X.T))
+    floor = float(np.max(np.linalg.eigvalsh(Rm)))
+    X = (V * np.maximum(w, floor)) @ V.T
+    pos_var = float(np.trace(spread)) / (2.0 * n) + floor
+    P = np.diag([pos_var, pos_var, velocity_std**2, velocity_std**2])
+    est = ExtendedEstimate(
+        x=np.concatenate([c, np.asarray(velocity, dtype=float)]), P=P, X=X, alpha=2.0 + n
+    )
+    t = float(scan.time)
+    return ExtendedTrack(
+        id=track_id,
+        estimate=est,
+        time=t,
+        score=score,
+        peak=score,
+        hits=1,
+        confirmed=confirmed,
+        created=t,
+        updated=t,
+        gamma=max(MIN_GAMMA, gamma),
+        detection_ids=_ids(scan, rows),
+    )
+
+
+def _ids(scan: Scan, rows: np.ndarray) -> tuple[str, ...]:
+    """The ids of the detections ``rows`` that have one."""
+    ids = scan.detection_ids
+    return tuple(str(ids[i]) for i in rows.tolist() if ids[i] is not None)
+
+
+def _dead(track: ExtendedTrack, t: float, cfg: ExtendedConfig, tm: TrackManagementConfig) -> bool:
+    if not track.confirmed:
+        return track.score <= tm.delete_threshold or t - track.updated > cfg.max_coast_time
+    return (
+        track.peak - track.score > tm.delete_drop_from_peak
+        or t - track.updated > cfg.max_coast_time
+    )
+
+
+def snapshot_of(track: ExtendedTrack) -> TrackSnapshot:
+    """The track as a snapshot at its own time (as :meth:`ExtendedTracker.snapshot` gives it)."""
+    return _snapshot(track, track.time)
+
+
+def _snapshot(track: ExtendedTrack, t: float) -> TrackSnapshot:
+    est = track.estimate
+    P = np.array(est.P, dtype=float)
+    P.flags.writeable = False
+    return TrackSnapshot(
+        id=track.id,
+        kind="extended",
+        status="confirmed" if track.confirmed else "tentative",
+        time=t,
+        position=(float(est.x[0]), float(est.x[1])),
+        velocity=(float(est.x[2]), float(est.x[3])),
+        covariance=P,
+        score=float(track.score),
+        hits=int(track.hits),
+        created=float(track.created),
+        updated=float(track.updated),
+        detection_ids=track.detection_ids,
+        extent=extent_ellipse(est.X),
+    )
