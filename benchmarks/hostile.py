@@ -24,7 +24,6 @@ every hostile batch refused with one Error report, and the counters agreeing at 
 from __future__ import annotations
 
 import argparse
-import re
 import sys
 import threading
 import time
@@ -38,8 +37,7 @@ import numpy as np
 import orjson
 import zenoh
 
-from benchmarks.service_load import rss_mb
-from benchmarks.service_process import running_service
+from benchmarks.service_process import proc_status_mb, rss_mb, running_service
 from clients.scenarios.multitarget import reference_scenario, simulate
 from service.keys import Keys, make_config
 
@@ -49,15 +47,6 @@ KEYS = Keys()
 PEAK_TARGET_MB = 300.0
 WAIT_TARGET_MS = 100.0
 HEALTH_TARGET_MS = 100.0
-
-
-def _status_mb(pid: int, field_name: str) -> float:
-    try:
-        status = Path(f"/proc/{pid}/status").read_text()
-    except OSError:
-        return float("nan")
-    m = re.search(rf"^{field_name}:\s+(\d+) kB", status, re.MULTILINE)
-    return int(m.group(1)) / 1024 if m else float("nan")
 
 
 def reset_peak(pid: int) -> bool:
@@ -265,7 +254,7 @@ def main(argv: list[str] | None = None) -> int:
                 time.sleep(1.0)  # the reports of the batches put during the case
                 sampler.stop.set()
                 sampler.join()
-                case.peak_mb = _status_mb(pid, "VmHWM") if hwm else sampler.peak
+                case.peak_mb = proc_status_mb(pid, "VmHWM") if hwm else sampler.peak
                 case.after_mb = rss_mb(pid)
                 case.waits_ms = other.between(start, end + 0.2)
                 case.health_ms = health.between(start, end + 0.2)

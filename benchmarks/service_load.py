@@ -24,19 +24,17 @@ from __future__ import annotations
 
 import argparse
 import math
-import os
 import re
 import subprocess
 import sys
 import threading
 import time
 from dataclasses import dataclass
-from pathlib import Path
 
 import httpx
 import numpy as np
 
-from benchmarks.service_process import ROOT, running_service
+from benchmarks.service_process import ROOT, cpu_seconds, rss_mb, running_service
 
 #: Seconds of scenario time between one phase's last batch and the next phase's first: within
 #: the service's time-jump allowance (``ingest.max_time_jump``, 10 s) whatever the wall time
@@ -162,27 +160,6 @@ def run_phase(
         frames=frames[0] if viewer else None,
         frames_dropped=(s1["view_frames_dropped"] - s0["view_frames_dropped"] if viewer else None),
     )
-
-
-def rss_mb(pid: int) -> float:
-    """Resident set size of process ``pid`` in MB (Linux ``/proc``; NaN elsewhere)."""
-    try:
-        status = Path(f"/proc/{pid}/status").read_text()
-    except OSError:
-        return float("nan")
-    m = re.search(r"^VmRSS:\s+(\d+) kB", status, re.MULTILINE)
-    return int(m.group(1)) / 1024 if m else float("nan")
-
-
-def cpu_seconds(pid: int) -> float:
-    """User plus system CPU seconds used so far by process ``pid``, all its threads (Linux
-    ``/proc``; NaN elsewhere)."""
-    try:
-        stat = Path(f"/proc/{pid}/stat").read_text()
-    except OSError:
-        return float("nan")
-    fields = stat[stat.rindex(")") + 2 :].split()  # after "pid (comm) "
-    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
 
 
 def frame_cost(repeats: int = 200) -> tuple[float, int, int]:

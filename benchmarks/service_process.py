@@ -9,6 +9,7 @@ own), waits until ``/health`` answers, and stops it with SIGTERM at the end (kil
 from __future__ import annotations
 
 import os
+import re
 import signal
 import socket
 import subprocess
@@ -95,3 +96,30 @@ def _wait_healthy(
             log = log_path.read_text(errors="replace").strip()
             raise RuntimeError(f"the service did not start:\n{log}")
         time.sleep(0.1)
+
+
+def proc_status_mb(pid: int, field_name: str) -> float:
+    """A memory field of ``/proc/<pid>/status`` (``VmRSS``, ``VmHWM``, ...) in MB (Linux; NaN
+    elsewhere or when the process is gone)."""
+    try:
+        status = Path(f"/proc/{pid}/status").read_text()
+    except OSError:
+        return float("nan")
+    m = re.search(rf"^{field_name}:\s+(\d+) kB", status, re.MULTILINE)
+    return int(m.group(1)) / 1024 if m else float("nan")
+
+
+def rss_mb(pid: int) -> float:
+    """Resident set size of process ``pid`` in MB (Linux ``/proc``; NaN elsewhere)."""
+    return proc_status_mb(pid, "VmRSS")
+
+
+def cpu_seconds(pid: int) -> float:
+    """User plus system CPU seconds used so far by process ``pid``, all its threads (Linux
+    ``/proc``; NaN elsewhere)."""
+    try:
+        stat = Path(f"/proc/{pid}/stat").read_text()
+    except OSError:
+        return float("nan")
+    fields = stat[stat.rindex(")") + 2 :].split()  # after "pid (comm) "
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")

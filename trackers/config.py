@@ -62,13 +62,18 @@ _BOUND_OK = {
 
 
 def _check_bounds(obj: Any, section: str) -> None:
-    """Raise ``ValueError`` naming ``section.field`` for a number (or a list item) that is not
-    a finite number within the field's bounds."""
+    """Raise ``ValueError`` naming ``section.field`` for a ``bool`` field that is not a boolean,
+    an ``int`` field that is not an integer, and a number (or a list item) that is not a
+    finite number within the field's bounds."""
     for f in fields(obj):
+        value = getattr(obj, f.name)
+        if f.type in ("bool", bool) and not isinstance(value, bool):
+            raise ValueError(f"{section}.{f.name}: expected true or false, got {value!r}")
+        if f.type in ("int", int) and (not isinstance(value, int) or isinstance(value, bool)):
+            raise ValueError(f"{section}.{f.name}: expected an integer, got {value!r}")
         bounds = [(k, f.metadata[k]) for k in _BOUND_TEXT if k in f.metadata]
         if not bounds:
             continue
-        value = getattr(obj, f.name)
         for v in value if isinstance(value, tuple | list) else (value,):
             ok = isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v)
             if not (ok and all(_BOUND_OK[k](v, b) for k, b in bounds)):
@@ -199,11 +204,6 @@ class InitiationConfig:
         if self.method not in INITIATION_METHODS:
             raise ValueError(
                 f"initiation.method: one of {list(INITIATION_METHODS)}, got {self.method!r}"
-            )
-        n = self.max_pairs_per_candidate
-        if not (isinstance(n, int) and not isinstance(n, bool) and 1 <= n <= 1000):
-            raise ValueError(
-                f"initiation.max_pairs_per_candidate: an integer in [1, 1000], got {n!r}"
             )
 
 
@@ -340,12 +340,6 @@ class ExtendedConfig:
 
     def __post_init__(self) -> None:
         _check_bounds(self, "extended")
-        if not isinstance(self.enabled, bool):
-            raise ValueError(f"extended.enabled: expected true or false, got {self.enabled!r}")
-        for name in ("min_detections", "birth_scans"):
-            v = getattr(self, name)
-            if not (isinstance(v, int) and not isinstance(v, bool)):
-                raise ValueError(f"extended.{name}: expected an integer, got {v!r}")
 
     @property
     def gate_threshold(self) -> float:

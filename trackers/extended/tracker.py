@@ -312,7 +312,7 @@ class ExtendedTracker:
                 gates = _PointGates(view, scan)
             return gates
 
-        tree = cKDTree(scan.z) if scan.size else None
+        tree = cKDTree(scan.z) if scan.size and state.tracks else None
         R_all = scan.R
         kept: list[ExtendedTrack] = []
         spawned: list[ExtendedTrack] = []
