@@ -14,38 +14,70 @@ cost grows with the number of close pairs, not with the square of the number of 
 from __future__ import annotations
 
 import numpy as np
-from scipy.sparse import coo_matrix
-from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
-__all__ = ["nested_unions", "resolution_subsets"]
+__all__ = ["component_labels", "nested_unions", "resolution_subsets"]
+
+#: Up to this many points, every pair's distance is computed (a k-d tree's set-up costs more).
+BRUTE_FORCE_POINTS = 64
+#: Up to this many edges, components come from a union-find loop; above, from array rounds.
+UNION_FIND_EDGES = 512
 
 
-def resolution_subsets(Z: np.ndarray, d_res: float) -> list[np.ndarray]:
+def resolution_subsets(Z: np.ndarray, d_res: float, min_size: int = 1) -> list[np.ndarray]:
     """The subsets of the ``(n, 2)`` points ``Z`` that chains of points closer than ``d_res``
     join, as arrays of row indices (ascending within a subset; subsets ordered by their first
-    row). A point with no neighbour within ``d_res`` is a subset of its own.
+    row). A point with no neighbour within ``d_res`` is a subset of its own. Only subsets of
+    at least ``min_size`` points are returned.
 
-    Single linkage: ``i ~ j`` when ``‖zᵢ − zⱼ‖ < d_res``, closed transitively.
+    Single linkage: ``i ~ j`` when ``‖zᵢ − zⱼ‖ ≤ d_res``, closed transitively.
     """
     Z = np.asarray(Z, dtype=float).reshape(-1, 2)
     n = Z.shape[0]
     if not (np.isfinite(d_res) and d_res > 0):
         raise ValueError(f"d_res: must be a finite number > 0, got {d_res!r}")
-    if n == 0:
+    if n < max(min_size, 1):
         return []
     if n == 1:
         return [np.zeros(1, dtype=np.intp)]
-    pairs = cKDTree(Z).query_pairs(r=float(d_res), output_type="ndarray")
-    if pairs.size == 0:
-        return [np.array([i], dtype=np.intp) for i in range(n)]
-    graph = coo_matrix((np.ones(pairs.shape[0]), (pairs[:, 0], pairs[:, 1])), shape=(n, n))
-    _, labels = connected_components(graph, directed=False)
+    if n <= BRUTE_FORCE_POINTS:  # every pair: cheaper than a k-d tree for a few points
+        x, y = Z[:, 0], Z[:, 1]  # (columns: numpy reduces a length-2 axis slowly)
+        dx, dy = x[:, None] - x[None, :], y[:, None] - y[None, :]
+        i, j = np.nonzero(dx * dx + dy * dy <= float(d_res) ** 2)
+        upper = i < j
+        i, j = i[upper], j[upper]
+    else:
+        pairs = cKDTree(Z).query_pairs(r=float(d_res), output_type="ndarray")
+        i, j = pairs[:, 0], pairs[:, 1]
+    labels = component_labels(n, i, j)
+    counts = np.bincount(labels, minlength=n)
+    if min_size > 1:
+        big = np.flatnonzero(counts >= min_size)
+        return [np.flatnonzero(labels == k) for k in big.tolist()]
     order = np.argsort(labels, kind="stable")
-    bounds = np.flatnonzero(np.diff(labels[order])) + 1
-    groups = np.split(order, bounds)
-    groups.sort(key=lambda g: int(g[0]))
-    return [g.astype(np.intp) for g in groups]
+    bounds = np.cumsum(counts[counts > 0])[:-1]
+    return np.split(order.astype(np.intp), bounds)
+
+
+def component_labels(n: int, i: np.ndarray, j: np.ndarray) -> np.ndarray:
+    """The connected components of the undirected graph on ``n`` nodes with edges
+    ``(iₖ, jₖ)``: each node's label is the smallest node of its component.
+
+    Min-label propagation with pointer jumping: ``ℓ(v) ← min(ℓ(v), min_{(v,u)} ℓ(u))``, then
+    ``ℓ ← ℓ(ℓ)``, until nothing changes. Every label is a node of the same component and never
+    grows, so it ends at the component's minimum; pointer jumping keeps the rounds few.
+    """
+    if len(i) <= UNION_FIND_EDGES:
+        return _union_find_labels(n, i, j)
+    labels = np.arange(n, dtype=np.intp)
+    while True:
+        new = labels.copy()
+        np.minimum.at(new, i, labels[j])
+        np.minimum.at(new, j, labels[i])
+        new = new[new]
+        if np.array_equal(new, labels):
+            return labels
+        labels = new
 
 
 def nested_unions(subsets: list[np.ndarray], fit: np.ndarray) -> list[np.ndarray]:
@@ -60,3 +92,23 @@ def nested_unions(subsets: list[np.ndarray], fit: np.ndarray) -> list[np.ndarray
         rows = np.concatenate([rows, subsets[k]])
         out.append(np.sort(rows))
     return out
+
+
+def _union_find_labels(n: int, i: np.ndarray, j: np.ndarray) -> np.ndarray:
+    """:func:`component_labels` by union-find with path halving, the smaller root kept (a
+    plain loop: faster than array rounds for a few hundred edges)."""
+    parent = list(range(n))
+
+    def root(a: int) -> int:
+        while parent[a] != a:
+            parent[a] = parent[parent[a]]
+            a = parent[a]
+        return a
+
+    for a, b in zip(i.tolist(), j.tolist(), strict=True):
+        ra, rb = root(a), root(b)
+        if ra < rb:
+            parent[rb] = ra
+        elif rb < ra:
+            parent[ra] = rb
+    return np.fromiter((root(a) for a in range(n)), dtype=np.intp, count=n)

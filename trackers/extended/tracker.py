@@ -39,6 +39,7 @@ velocity and extent prior; such a track is confirmed at once.
 
 from __future__ import annotations
 
+import itertools
 import math
 from dataclasses import dataclass, replace
 
@@ -74,6 +75,9 @@ SPLIT_SCANS = 2
 BIRTH_MIN_SPAN = 10.0
 #: Gate (χ²₂, 99 %) of a confirmed individual track that keeps its detections for it.
 POINT_GATE = 9.21
+#: Up to this many (detection, track) pairs, every pair is tested (no k-d tree: building and
+#: querying one costs more than testing a few thousand pairs outright).
+BRUTE_FORCE_PAIRS = 4096
 #: Weight of the latest scan's detection count in the expected count γ.
 GAMMA_GAIN = 0.2
 #: Smallest expected detection count: keeps ln Poisson finite and a miss's cost positive.
@@ -154,6 +158,13 @@ def _log_poisson(n: int, gamma: float) -> float:
     return n * math.log(gamma) - gamma - math.lgamma(n + 1)
 
 
+def _largest_eigenvalue(S: np.ndarray) -> np.ndarray:
+    """The larger eigenvalue of each symmetric 2x2 matrix of ``S (n, 2, 2)``:
+    ``(a + c)/2 + √(((a − c)/2)² + b²)``."""
+    a, b, c = S[:, 0, 0], S[:, 0, 1], S[:, 1, 1]
+    return 0.5 * (a + c) + np.sqrt(0.25 * (a - c) ** 2 + b * b)
+
+
 def _mahalanobis(d: np.ndarray, S: np.ndarray) -> np.ndarray:
     """``dᵢᵀ Sᵢ⁻¹ dᵢ`` for ``d (n, 2)`` and ``S (n, 2, 2)`` or ``(2, 2)``, 2x2 written out."""
     S = np.broadcast_to(S, (d.shape[0], 2, 2))
@@ -164,7 +175,9 @@ def _mahalanobis(d: np.ndarray, S: np.ndarray) -> np.ndarray:
 
 
 class _PointGates:
-    """Which confirmed individual tracks have a detection in their 99 % gate."""
+    """The (detection, confirmed individual track) pairs of a scan where the detection lies in
+    the track's 99 % gate, found once per scan with a k-d tree over the tracks and held as two
+    index arrays (``det`` rows of the scan, ``trk`` indices into the confirmed tracks)."""
 
     def __init__(self, view: PointTrackView, scan: Scan) -> None:
         self.rows = np.flatnonzero(view.confirmed)
@@ -172,31 +185,47 @@ class _PointGates:
         self.v = view.x[self.rows, 2:4]
         self.Pp = view.P[self.rows, :2, :2]
         self.Pv = view.P[self.rows, 2:4, 2:4]
-        self.ids = [view.ids[i] for i in self.rows.tolist()]
-        self._scan = scan
-        self._tree = cKDTree(self.xy) if self.rows.size else None
-        if self.rows.size:
-            spread = np.max(np.linalg.eigvalsh(self.Pp)[:, -1])
-            r_max = float(np.max(np.linalg.eigvalsh(scan.R)[:, -1])) if scan.size else 0.0
-            self._radius = math.sqrt(POINT_GATE * (spread + r_max))
+        self.size = scan.size
+        self.det = np.zeros(0, dtype=np.intp)
+        self.trk = np.zeros(0, dtype=np.intp)
+        if not (self.rows.size and scan.size):
+            return
+        if self.rows.size * scan.size <= BRUTE_FORCE_PAIRS:  # every pair: cheaper than a tree
+            det, trk = (a.ravel() for a in np.indices((scan.size, self.rows.size)))
+        else:
+            spread = float(np.max(_largest_eigenvalue(self.Pp)))
+            r_max = float(np.max(_largest_eigenvalue(scan.R)))
+            radius = math.sqrt(POINT_GATE * (spread + r_max))
+            near = cKDTree(self.xy).query_ball_point(scan.z, radius)
+            counts = np.fromiter(map(len, near), dtype=np.intp, count=scan.size)
+            trk = np.fromiter(
+                itertools.chain.from_iterable(near), dtype=np.intp, count=counts.sum()
+            )
+            det = np.repeat(np.arange(scan.size, dtype=np.intp), counts)
+        # np.take, not z[det]: several times faster for thousands of rows
+        m = _mahalanobis(
+            np.take(scan.z, det, axis=0) - np.take(self.xy, trk, axis=0),
+            np.take(self.Pp, trk, axis=0) + np.take(scan.R, det, axis=0),
+        )
+        inside = m <= POINT_GATE
+        self.det, self.trk = det[inside], trk[inside]
 
-    def tracks_of(self, det: np.ndarray) -> list[np.ndarray]:
-        """For each detection row in ``det``, the indices (into the confirmed tracks) whose
-        gate holds it."""
-        if self._tree is None or det.size == 0:
-            return [np.zeros(0, dtype=np.intp) for _ in range(det.size)]
-        z = self._scan.z[det]
-        near = self._tree.query_ball_point(z, self._radius)
-        out = []
-        for k, cand in enumerate(near):
-            if not cand:
-                out.append(np.zeros(0, dtype=np.intp))
-                continue
-            j = np.asarray(cand, dtype=np.intp)
-            d = z[k] - self.xy[j]
-            m = _mahalanobis(d, self.Pp[j] + self._scan.R[det[k]])
-            out.append(j[m <= POINT_GATE])
-        return out
+    def pairs_in(self, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The gated pairs whose detection is one of ``rows``: (detection rows, track indices)."""
+        if self.det.size == 0 or rows.size == 0:
+            return self.det[:0], self.trk[:0]
+        mask = np.zeros(self.size, dtype=bool)
+        mask[rows] = True
+        sel = mask[self.det]
+        return self.det[sel], self.trk[sel]
+
+    def without(self, rows: np.ndarray, det: np.ndarray, bad: np.ndarray) -> np.ndarray:
+        """``rows`` less the detections of the pairs ``det[bad]``."""
+        if not bad.any():
+            return rows
+        drop = np.zeros(self.size, dtype=bool)
+        drop[det[bad]] = True
+        return rows[~drop[rows]]
 
 
 def _moves_with(
@@ -335,17 +364,12 @@ class ExtendedTracker:
                 rows = near
             if rows.size:  # detections of individual targets that do not move with it
                 pg = point_gates()
-                if pg.rows.size:
-                    keep = np.ones(rows.size, dtype=bool)
-                    for k, js in enumerate(pg.tracks_of(rows)):
-                        if (
-                            js.size
-                            and not _moves_with(
-                                pg.v[js], pg.Pv[js], v, est.P[2:4, 2:4], cfg.group_speed_spread, 0.0
-                            ).all()
-                        ):
-                            keep[k] = False
-                    rows = rows[keep]
+                det, trk = pg.pairs_in(rows)
+                if det.size:
+                    moving = _moves_with(
+                        pg.v[trk], pg.Pv[trk], v, est.P[2:4, 2:4], cfg.group_speed_spread, 0.0
+                    )
+                    rows = pg.without(rows, det, ~moving)
             chosen = np.zeros(0, dtype=np.intp)
             left_out: list[np.ndarray] = []
             gain = -track.gamma  # ΔL(∅)
@@ -476,15 +500,18 @@ class ExtendedTracker:
     def _births(self, scan, claimed, point_gates, state, next_id, t):
         cfg, tm = state.config, state.management
         free = np.flatnonzero(~claimed)
-        clusters: list[np.ndarray] = []
-        if free.size >= cfg.min_detections:
-            for s in resolution_subsets(scan.z[free], cfg.resolution_distance):
-                if s.size < cfg.min_detections:
-                    continue
-                rows = free[s]
-                rows = _group_rows(rows, point_gates(), cfg)
-                if rows.size >= cfg.min_detections:
-                    clusters.append(rows)
+        clusters = [
+            free[s]
+            for s in resolution_subsets(
+                np.take(scan.z, free, axis=0), cfg.resolution_distance, cfg.min_detections
+            )
+        ]
+        if clusters:
+            clusters = [
+                rows
+                for rows in _group_clusters(clusters, point_gates(), cfg)
+                if rows.size >= cfg.min_detections
+            ]
         centroids = np.array([scan.z[r].mean(axis=0) for r in clusters]).reshape(-1, 2)
         used = np.zeros(len(clusters), dtype=bool)
         candidates: list[_Candidate] = []
@@ -532,24 +559,43 @@ class ExtendedTracker:
         return born, tuple(candidates), next_id
 
 
-def _group_rows(rows: np.ndarray, pg: _PointGates, cfg: ExtendedConfig) -> np.ndarray:
-    """The detections of a cluster that a group may hold: those no confirmed individual track
-    explains, and those of confirmed tracks that move together (within
-    ``group_speed_spread`` of their median velocity)."""
-    if not pg.rows.size:
-        return rows
-    owners = pg.tracks_of(rows)
-    explained = np.array([o.size > 0 for o in owners])
-    if not explained.any():
-        return rows
-    js = np.unique(np.concatenate([o for o in owners if o.size]))
-    v = pg.v[js]
-    median = np.median(v, axis=0)
-    together = set(js[np.hypot(*(v - median).T) <= cfg.group_speed_spread].tolist())
-    if len(together) < 2:
-        together = set()
-    keep = [not e or set(o.tolist()) <= together for e, o in zip(explained, owners, strict=True)]
-    return rows[np.asarray(keep, dtype=bool)]
+def _group_clusters(
+    clusters: list[np.ndarray], pg: _PointGates, cfg: ExtendedConfig
+) -> list[np.ndarray]:
+    """The detections of each cluster (rows of the scan) that a group may hold: those no
+    confirmed individual track explains, and those of confirmed tracks that move together
+    (within ``group_speed_spread`` of the median velocity of the cluster's tracks, two
+    tracks at least). All clusters at once, in array operations."""
+    if pg.det.size == 0:
+        return clusters
+    K, m = len(clusters), pg.rows.size
+    which = np.full(pg.size, -1, dtype=np.intp)
+    which[np.concatenate(clusters)] = np.repeat(np.arange(K), [r.size for r in clusters])
+    c = which[pg.det]
+    inside = c >= 0
+    if not inside.any():
+        return clusters
+    c, det, trk = c[inside], pg.det[inside], pg.trk[inside]
+    key = c * m + trk
+    uniq = np.unique(key)  # each (cluster, track) once, by cluster
+    uc, ut = np.divmod(uniq, m)
+    v = np.take(pg.v, ut, axis=0)
+    counts = np.bincount(uc, minlength=K)
+    lo = np.cumsum(counts) - counts + np.maximum(counts - 1, 0) // 2
+    hi = np.cumsum(counts) - counts + counts // 2
+    median = np.zeros((K, 2))
+    has = counts > 0
+    for axis in (0, 1):  # per-cluster median: sort by (cluster, component)
+        sv = v[np.lexsort((v[:, axis], uc)), axis]
+        median[has, axis] = 0.5 * (sv[lo[has]] + sv[hi[has]])
+    near = np.hypot(*(v - np.take(median, uc, axis=0)).T) <= cfg.group_speed_spread
+    near &= np.bincount(uc, weights=near, minlength=K)[uc] >= 2
+    ok = near[np.searchsorted(uniq, key)]
+    if ok.all():
+        return clusters
+    drop = np.zeros(pg.size, dtype=bool)
+    drop[det[~ok]] = True
+    return [rows[~drop[rows]] for rows in clusters]
 
 
 def _split_evidence(

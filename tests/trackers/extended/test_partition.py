@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from trackers.extended.partition import nested_unions, resolution_subsets
+from trackers.extended.partition import component_labels, nested_unions, resolution_subsets
 
 
 def test_chains_closer_than_the_resolution_distance_are_one_subset():
@@ -46,3 +46,36 @@ def test_bad_resolution_distance_and_fit_count():
         resolution_subsets(np.zeros((2, 2)), 0.0)
     with pytest.raises(ValueError, match="one fit"):
         nested_unions([np.array([0])], np.array([1.0, 2.0]))
+
+
+def _components_by_scipy(n: int, i: np.ndarray, j: np.ndarray) -> list[tuple[int, ...]]:
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    graph = coo_matrix((np.ones(len(i)), (i, j)), shape=(n, n))
+    _, label = connected_components(graph, directed=False)
+    return sorted(tuple(np.flatnonzero(label == k).tolist()) for k in set(label.tolist()))
+
+
+@pytest.mark.parametrize("n_edges", [30, 3000])  # the union-find loop and the array rounds
+def test_component_labels_are_each_components_smallest_node(n_edges):
+    rng = np.random.default_rng(n_edges)
+    n = 4000
+    i, j = rng.integers(0, n, n_edges), rng.integers(0, n, n_edges)
+    labels = component_labels(n, i, j)
+    got = sorted(tuple(np.flatnonzero(labels == k).tolist()) for k in set(labels.tolist()))
+    assert got == _components_by_scipy(n, i, j)
+    assert all(labels[v] == min(np.flatnonzero(labels == labels[v])) for v in range(0, n, 97))
+
+
+@pytest.mark.parametrize("n", [40, 300])  # every pair tested, and the k-d tree
+def test_subsets_match_connected_components_and_min_size_keeps_the_large_ones(n):
+    rng = np.random.default_rng(n)
+    Z = rng.uniform(0, 2000, size=(n, 2))
+    from scipy.spatial import cKDTree
+
+    pairs = cKDTree(Z).query_pairs(150.0, output_type="ndarray").reshape(-1, 2)
+    expected = _components_by_scipy(n, pairs[:, 0], pairs[:, 1])
+    assert [tuple(s.tolist()) for s in resolution_subsets(Z, 150.0)] == expected
+    big = [tuple(s.tolist()) for s in resolution_subsets(Z, 150.0, min_size=3)]
+    assert big == [s for s in expected if len(s) >= 3] and big

@@ -114,3 +114,46 @@ def test_harbour_backwash_is_one_extended_track_and_false_tracks_fall():
                 false_a += false
     assert len(backwash_ids) == 1
     assert false_h <= 0.2 * false_a  # at least 80 % fewer false confirmed tracks
+
+
+def _view_of(xy, v, confirmed):
+    from trackers.peers import PointTrackView
+
+    n = len(xy)
+    x = np.zeros((n, 5))
+    x[:, :2], x[:, 2:4] = xy, v
+    return PointTrackView(
+        time=0.0,
+        ids=tuple(f"T{i}" for i in range(n)),
+        x=x,
+        P=np.tile(np.diag([100.0, 100.0, 1.0, 1.0, 1e-4]), (n, 1, 1)),
+        score=np.zeros(n),
+        hits=np.full(n, 5),
+        confirmed=np.asarray(confirmed),
+        created=np.zeros(n),
+        updated=np.zeros(n),
+    )
+
+
+def test_a_birth_cluster_keeps_tracks_moving_together_and_leaves_the_others_theirs():
+    """Cluster A: detections of three confirmed tracks at 10 m/s east and one at 10 m/s north
+    (left to its track), and one no track explains. Cluster B: two tracks moving apart, which
+    are no group (both left out), and one free detection."""
+    from trackers.extended.tracker import _group_clusters, _PointGates
+
+    xy = np.array([[0, 0], [60, 0], [120, 0], [180, 0], [5000, 0], [5060, 0]], dtype=float)
+    v = np.array([[10, 0], [10.5, 0], [9.5, 0], [0, 10], [10, 0], [-10, 0]], dtype=float)
+    view = _view_of(xy, v, [True] * 6)
+    z = np.vstack([xy + 3.0, [[240.0, 0.0], [5120.0, 0.0]]])
+    scan = Scan("s", 0.0, z, np.tile(R, (len(z), 1, 1)))
+    pg = _PointGates(view, scan)
+    a, b = _group_clusters(
+        [np.array([0, 1, 2, 3, 6]), np.array([4, 5, 7])], pg, TrackerConfig().extended
+    )
+    assert a.tolist() == [0, 1, 2, 6] and b.tolist() == [7]
+    # a tentative track explains nothing: its detection stays with the cluster
+    view = _view_of(xy, v, [True, True, True, False, True, True])
+    (a,) = _group_clusters(
+        [np.array([0, 1, 2, 3, 6])], _PointGates(view, scan), TrackerConfig().extended
+    )
+    assert a.tolist() == [0, 1, 2, 3, 6]
