@@ -2,6 +2,7 @@
 alongside.
 
     python -m benchmarks.service_load [--rate 200] [--seconds 15] [--rounds 1] [--no-viewer]
+                                      [--viewer-first]
 
 Starts ``tracker-service`` as a subprocess on free loopback ports, then runs the scenario
 publisher (``clients.publish``, reliable, ``CongestionControl.BLOCK``) as a second process:
@@ -12,12 +13,13 @@ detections). During each phase this process reads ``GET /api/v1/tracks`` about 1
 second and records the latency. Printed per phase: batches published, processed, rejected
 and dropped (from ``/api/v1/stats``), the processing rate, the tracker's time per batch and
 the REST latency percentiles, against the targets (≥ 200 batches/s, nothing lost, p99 < 20 ms);
-then the service's resident memory after each phase. Then the paced and max-rate phases again
-with a live viewer connected (a thread reading ``GET /api/v1/stream`` as a browser would),
-printing the frames it got and those dropped for it (unless ``--no-viewer``), and what one
-frame costs to build, timed in process. Each phase also prints the service process's CPU
-time (all threads) per processed batch, read from ``/proc``. Exits 1 when a
-target is missed.
+then the service's resident memory after each phase. The paced and the (last) max-rate phase
+each have a twin with a live viewer connected (a thread reading ``GET /api/v1/stream`` as a
+browser would), run right after it (before it with ``--viewer-first``: compare the two orders
+to tell the viewer's cost from the phase order's), printing the frames the viewer got and those
+dropped for it (unless ``--no-viewer``), and what one frame costs to build, timed in process.
+Each phase also prints the service process's CPU time (all threads) per processed batch, read
+from ``/proc``. Exits 1 when a target is missed.
 """
 
 from __future__ import annotations
@@ -226,6 +228,11 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument(
         "--no-viewer", action="store_true", help="skip the phases with a live viewer connected"
     )
+    parser.add_argument(
+        "--viewer-first",
+        action="store_true",
+        help="run each phase with a viewer before its twin without one (the default is after)",
+    )
     args = parser.parse_args(argv)
     if args.rounds < 1:
         parser.error("--rounds: at least 1")
@@ -237,32 +244,30 @@ def main(argv: list[str] | None = None) -> int:
         endpoint = service.endpoint
         scans = int(args.rate * args.seconds)
         rss = [("started", rss_mb(service.pid))]
-        phases = [
-            run_phase(
-                f"paced {args.rate:.0f}/s", client, endpoint, scans, args.rate, 0.0, pid=service.pid
-            )
-        ]
-        rss.append((phases[-1].name, rss_mb(service.pid)))
-        for k in range(1, args.rounds + 1):
-            name = "max rate" if args.rounds == 1 else f"max rate {k}"
-            offset = k * (float(scans) + PHASE_GAP)
-            phases.append(run_phase(name, client, endpoint, scans, None, offset, pid=service.pid))
-            rss.append((name, rss_mb(service.pid)))
-        if not args.no_viewer:  # the same two phases with a browser's stream open
-            offset = (args.rounds + 1) * (float(scans) + PHASE_GAP)
-            name = "paced+viewer"
+        phases: list[Phase] = []
+        offset = 0.0
+
+        def run(name: str, rate: float | None, viewer: bool) -> None:
+            nonlocal offset
             phases.append(
                 run_phase(
-                    name, client, endpoint, scans, args.rate, offset, viewer=True, pid=service.pid
+                    name, client, endpoint, scans, rate, offset, viewer=viewer, pid=service.pid
                 )
             )
             rss.append((name, rss_mb(service.pid)))
             offset += float(scans) + PHASE_GAP
-            name = "max+viewer"
-            phases.append(
-                run_phase(name, client, endpoint, scans, None, offset, viewer=True, pid=service.pid)
-            )
-            rss.append((name, rss_mb(service.pid)))
+
+        # each viewer phase right after (or, with --viewer-first, right before) its twin
+        # without one, so that the service's state and the machine are alike for both
+        twins = (
+            [False] if args.no_viewer else ([True, False] if args.viewer_first else [False, True])
+        )
+        for viewer in twins:
+            run(f"paced {args.rate:.0f}/s" + ("+viewer" if viewer else ""), args.rate, viewer)
+        for k in range(1, args.rounds + 1):
+            name = "max rate" if args.rounds == 1 else f"max rate {k}"
+            for viewer in twins if k == args.rounds else [False]:
+                run(name + ("+viewer" if viewer else ""), None, viewer)
 
     decode_ms, n_det = ingest_cost()
     print(
@@ -272,14 +277,14 @@ def main(argv: list[str] | None = None) -> int:
     print("== the service under load: ~55-detection batches over Zenoh from another process,")
     print("   GET /api/v1/tracks ~100/s from a third; service, publisher and reader share 2 cores")
     print(
-        f"   {'phase':<13}{'published':>10}{'processed':>10}{'rejected':>9}{'dropped':>8}"
+        f"   {'phase':<20}{'published':>10}{'processed':>10}{'rejected':>9}{'dropped':>8}"
         f"{'batches/s':>10}{'tracker p50/p99 ms':>20}{'CPU ms/batch':>13}"
         f"{'GET p50/p99/max ms':>22}"
     )
     for p in phases:
         g = p.get_ms
         print(
-            f"   {p.name:<13}{p.published:>10}{p.processed:>10}{p.rejected:>9}{p.dropped:>8}"
+            f"   {p.name:<20}{p.published:>10}{p.processed:>10}{p.rejected:>9}{p.dropped:>8}"
             f"{p.rate:>10.1f}{p.tracker_p50:>11.2f}/{p.tracker_p99:<8.2f}"
             f"{p.cpu_ms_per_batch:>13.2f}"
             f"{np.percentile(g, 50):>9.2f}/{np.percentile(g, 99):.2f}/{g.max():.1f}"
