@@ -31,6 +31,7 @@ and trace); invalid input raises :class:`ValueError`.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -40,6 +41,7 @@ __all__ = [
     "gate_covariance",
     "innovation_covariance",
     "inv_sqrtm_2x2",
+    "merged",
     "predict",
     "sqrtm_2x2",
     "subset_log_likelihood",
@@ -434,11 +436,16 @@ def gate_covariance(est: ExtendedEstimate, R: np.ndarray, z_scale: float = 0.25)
 
 
 def subset_log_likelihood(
-    est: ExtendedEstimate, Z: np.ndarray, R: np.ndarray, z_scale: float = 0.25
+    est: ExtendedEstimate,
+    Z: np.ndarray,
+    R: np.ndarray,
+    z_scale: float = 0.25,
+    extent_uncertain: bool = False,
 ) -> float:
     """Log density of the ``n ≥ 1`` detections ``Z`` under the predicted estimate.
 
-    The extent is taken at its predicted value (plug-in), the centroid is integrated out:
+    The extent is taken at its predicted value (plug-in) unless ``extent_uncertain``; the
+    centroid is integrated out:
     given ``x``, the detections are i.i.d. ``yʲ ~ N(H x, Y)`` with ``Y = z X + R``, and
     ``x ~ N(x⁻, P)``, so the stacked ``2n``-vector ``y = [y¹; …; yⁿ]`` is Gaussian with mean
     ``1 ⊗ H x`` and covariance ``11ᵀ ⊗ H P Hᵀ + I ⊗ Y``.
@@ -457,11 +464,24 @@ def subset_log_likelihood(
     with ``d = 2``, ``ȳ`` the mean and ``Ȳ = Σ (yʲ − ȳ)(yʲ − ȳ)ᵀ`` the scatter of the
     detections.
 
+    With ``extent_uncertain``, the spread ``Y`` is not known but inverse-Wishart with
+    ``ν = α + d + 1`` degrees of freedom and mean ``Ŷ = z X + R`` (scale ``Ψ = α Ŷ``; the
+    extent's own memory α, so a young or long-coasted extent is loose and a well-fed one
+    tends to the plug-in), and is integrated out of the ``m = n − 1`` contrasts (a
+    matrix-variate t)::
+
+        log p(h) = −(m d/2) log π + log Γ₂((ν + m)/2) − log Γ₂(ν/2)
+                   + (ν/2) log|Ψ| − ((ν + m)/2) log|Ψ + Ȳ|
+
+    with ``Γ₂(a) = √π Γ(a) Γ(a − ½)``. A column of vehicles bending round a corner, whose
+    scatter the predicted ellipse no longer fits, then costs a few nats, not hundreds.
+
     Args:
         est: predicted estimate.
         Z: ``(n, 2)`` detections, ``n ≥ 1``.
         R: ``(2, 2)`` SPD measurement covariance.
         z_scale: scaling factor ``z > 0``.
+        extent_uncertain: integrate the spread over its inverse-Wishart uncertainty.
 
     Returns:
         ``log p(Z)`` (natural log, density in m^(−2n)).
@@ -491,10 +511,65 @@ def subset_log_likelihood(
     maha = (sc * n0 * n0 - 2.0 * sb * n0 * n1 + sa * n1 * n1) / det_s
     log_n_mean = -_LOG_2PI - 0.5 * math.log(det_s) - 0.5 * maha
     det_y = ya * yc - yb * yb
+    if extent_uncertain:
+        m, alpha = n - 1, float(est.alpha)
+        nu = alpha + 3.0
+        det_psi = alpha * alpha * det_y
+        pa, pb, pc = alpha * ya + ba, alpha * yb + bb, alpha * yc + bc
+        det_post = pa * pc - pb * pb
+        return (
+            -math.log(n)
+            + log_n_mean
+            - m * math.log(math.pi)
+            + _log_gamma_2(0.5 * (nu + m))
+            - _log_gamma_2(0.5 * nu)
+            + 0.5 * nu * math.log(det_psi)
+            - 0.5 * (nu + m) * math.log(det_post)
+        )
     tr_yinv_scatter = (yc * ba - 2.0 * yb * bb + ya * bc) / det_y
     return (
         -math.log(n)
         + log_n_mean
         - 0.5 * (n - 1) * (2.0 * _LOG_2PI + math.log(det_y))
         - 0.5 * tr_yinv_scatter
+    )
+
+
+def _log_gamma_2(a: float) -> float:
+    """ln Γ₂(a) = ½ ln π + ln Γ(a) + ln Γ(a − ½), the bivariate gamma function."""
+    return 0.5 * math.log(math.pi) + math.lgamma(a) + math.lgamma(a - 0.5)
+
+
+def merged(
+    estimates: Sequence[ExtendedEstimate], weights: Sequence[float], z_scale: float = 0.25
+) -> ExtendedEstimate:
+    """One estimate for several tracks of the same object or group (moment matching).
+
+    With normalized weights ``wᵢ`` (e.g. each track's expected detections a scan):
+
+        x = Σ wᵢ xᵢ,   P = Σ wᵢ (Pᵢ + (xᵢ − x)(xᵢ − x)ᵀ),
+        X = Σ wᵢ (Xᵢ + (cᵢ − c)(cᵢ − c)ᵀ / z),   α = min αᵢ
+
+    (``c`` the centroid part of ``x``): the detections' spread about the common centroid is
+    the weighted spread of each part, ``z Xᵢ``, plus the parts' own offsets.
+    """
+    if not estimates or len(estimates) != len(weights):
+        raise ValueError("one weight per estimate, at least one estimate")
+    w = np.asarray(weights, dtype=float)
+    if not (np.isfinite(w).all() and (w >= 0).all() and w.sum() > 0):
+        raise ValueError(f"weights: must be finite, ≥ 0 and not all 0, got {weights!r}")
+    z = _z_scale(z_scale)
+    w = w / w.sum()
+    xs = np.stack([e.x for e in estimates])
+    x = w @ xs
+    d = xs - x
+    P = sum(wi * (e.P + np.outer(di, di)) for wi, e, di in zip(w, estimates, d, strict=True))
+    X = sum(
+        wi * (e.X + np.outer(di[:2], di[:2]) / z) for wi, e, di in zip(w, estimates, d, strict=True)
+    )
+    return ExtendedEstimate(
+        x=x,
+        P=0.5 * (P + P.T),
+        X=0.5 * (X + X.T),
+        alpha=min(e.alpha for e in estimates),
     )

@@ -51,6 +51,7 @@ from trackers.extended.partition import nested_unions, resolution_subsets
 from trackers.extended.random_matrix import (
     ExtendedEstimate,
     gate_covariance,
+    merged,
     predict,
     subset_log_likelihood,
     update,
@@ -70,6 +71,9 @@ __all__ = [
 
 #: Scans in a row a separated subset must be left out before it becomes a track of its own.
 SPLIT_SCANS = 2
+#: Scans in a row a confirmed individual track must be inside a confirmed extended track's
+#: extent and moving with it before it is absorbed (a vehicle passing alongside is not).
+ABSORB_SCANS = 3
 #: Shortest time (s) over which a cluster must be seen before it starts a track: at a fast
 #: revisit, independent targets that happen to be close look like a group for a few scans.
 BIRTH_MIN_SPAN = 10.0
@@ -111,17 +115,46 @@ class ExtendedTrack:
     split_centroid: tuple[float, float] = (0.0, 0.0)
     split_radius: float = 0.0
     split_time: float = 0.0
+    #: When its detections were first seen together (its cluster's first scan, before it was
+    #: born); individual tracks created since, inside its extent, came from its detections.
+    origin: float = math.inf
 
 
 @dataclass(frozen=True, eq=False)
 class _Candidate:
-    """A cluster seen in consecutive scans, not yet a track."""
+    """A cluster seen in consecutive scans, not yet a track: its latest centroid, and the
+    sums for the least-squares line ``c(t) = a + v (t − t₀)`` through its centroids (a
+    cluster of clutter jitters by tens of metres a scan: a velocity from two centroids would
+    be off by tens of m/s)."""
 
     centroid: np.ndarray
-    velocity: np.ndarray
     first_time: float
     time: float
     seen: int
+    #: Σ1, Στ, Στ², Σc (2,), Στc (2,) over the centroids seen, τ = t − first_time.
+    sums: tuple[float, float, float, np.ndarray, np.ndarray]
+
+    @classmethod
+    def first(cls, centroid: np.ndarray, t: float) -> _Candidate:
+        return cls(centroid, t, t, 1, (1.0, 0.0, 0.0, centroid.copy(), np.zeros(2)))
+
+    def seen_again(self, centroid: np.ndarray, t: float) -> _Candidate:
+        n, s1, s2, sc, stc = self.sums
+        tau = t - self.first_time
+        sums = (n + 1.0, s1 + tau, s2 + tau * tau, sc + centroid, stc + tau * centroid)
+        return _Candidate(centroid, self.first_time, t, self.seen + 1, sums)
+
+    @property
+    def velocity(self) -> np.ndarray:
+        """The line's slope ``v = (n Στc − Στ Σc) / (n Στ² − (Στ)²)`` (0 for one centroid)."""
+        n, s1, s2, sc, stc = self.sums
+        den = n * s2 - s1 * s1
+        return (n * stc - s1 * sc) / den if n > 1 and den > 0 else np.zeros(2)
+
+    def predicted(self, t: float) -> np.ndarray:
+        """The line's centroid at ``t``: ``Σc/n + v (t − t₀ − Στ/n)``."""
+        n, s1, _, sc, _ = self.sums
+        return sc / n + self.velocity * (t - self.first_time - s1 / n)
 
 
 @dataclass(frozen=True, eq=False)
@@ -132,6 +165,8 @@ class _State:
     candidates: tuple[_Candidate, ...] = ()
     next_id: int = 1
     time: float | None = None
+    #: Confirmed individual tracks seen inside an extent and moving with it: scans in a row.
+    absorbing: tuple[tuple[str, int], ...] = ()
 
 
 def extent_ellipse(X: np.ndarray) -> Extent:
@@ -185,9 +220,11 @@ class _PointGates:
         self.v = view.x[self.rows, 2:4]
         self.Pp = view.P[self.rows, :2, :2]
         self.Pv = view.P[self.rows, 2:4, 2:4]
+        self.created = view.created[self.rows]
         self.size = scan.size
         self.det = np.zeros(0, dtype=np.intp)
         self.trk = np.zeros(0, dtype=np.intp)
+        self.m = np.zeros(0)
         if not (self.rows.size and scan.size):
             return
         if self.rows.size * scan.size <= BRUTE_FORCE_PAIRS:  # every pair: cheaper than a tree
@@ -208,16 +245,32 @@ class _PointGates:
             np.take(self.Pp, trk, axis=0) + np.take(scan.R, det, axis=0),
         )
         inside = m <= POINT_GATE
-        self.det, self.trk = det[inside], trk[inside]
+        self.det, self.trk, self.m = det[inside], trk[inside], m[inside]
 
     def pairs_in(self, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The gated pairs whose detection is one of ``rows``: (detection rows, track indices)."""
+        sel = self._select(rows)
+        return self.det[sel], self.trk[sel]
+
+    def best_of(self, rows: np.ndarray, tracks: np.ndarray) -> np.ndarray:
+        """For each of the confirmed ``tracks`` (a boolean mask over them), the detection of
+        ``rows`` nearest to it in its gate (Mahalanobis), if any: what it would take."""
+        sel = self._select(rows)
+        sel[sel] = tracks[self.trk[sel]]
+        det, trk, m = self.det[sel], self.trk[sel], self.m[sel]
+        if det.size == 0:
+            return det
+        order = np.lexsort((m, trk))
+        first = np.ones(order.size, dtype=bool)
+        first[1:] = trk[order][1:] != trk[order][:-1]
+        return np.unique(det[order[first]])
+
+    def _select(self, rows: np.ndarray) -> np.ndarray:
         if self.det.size == 0 or rows.size == 0:
-            return self.det[:0], self.trk[:0]
+            return np.zeros(self.det.size, dtype=bool)
         mask = np.zeros(self.size, dtype=bool)
         mask[rows] = True
-        sel = mask[self.det]
-        return self.det[sel], self.trk[sel]
+        return mask[self.det]
 
     def without(self, rows: np.ndarray, det: np.ndarray, bad: np.ndarray) -> np.ndarray:
         """``rows`` less the detections of the pairs ``det[bad]``."""
@@ -353,28 +406,37 @@ class ExtendedTracker:
             est = predict(track.estimate, dt, cfg.q, cfg.tau)
             c, v = est.x[:2], est.x[2:4]
             rows = np.zeros(0, dtype=np.intp)
+            subsets: list[np.ndarray] = []
             if tree is not None:
                 G = gate_covariance(est, np.mean(R_all, axis=0), cfg.z_scale)
                 radius = math.sqrt(cfg.gate_threshold * float(np.linalg.eigvalsh(G)[-1]))
-                near = np.asarray(tree.query_ball_point(c, radius * 1.5), dtype=np.intp)
-                near = near[~claimed[near]]
-                if near.size:
-                    Gj = G - np.mean(R_all, axis=0) + R_all[near]
-                    near = near[_mahalanobis(scan.z[near] - c, Gj) <= cfg.gate_threshold]
-                rows = near
-            if rows.size:  # detections of individual targets that do not move with it
+                near = np.asarray(
+                    tree.query_ball_point(c, 1.5 * radius + cfg.resolution_distance),
+                    dtype=np.intp,
+                )
+                rows = near[~claimed[near]]
+            if rows.size:  # the detection of each individual target not moving with it
                 pg = point_gates()
-                det, trk = pg.pairs_in(rows)
-                if det.size:
-                    moving = _moves_with(
-                        pg.v[trk], pg.Pv[trk], v, est.P[2:4, 2:4], cfg.group_speed_spread, 0.0
+                if pg.det.size:
+                    apart = ~_moves_with(
+                        pg.v, pg.Pv, v, est.P[2:4, 2:4], cfg.group_speed_spread, 0.0
                     )
-                    rows = pg.without(rows, det, ~moving)
+                    theirs = pg.best_of(rows, apart)
+                    rows = np.setdiff1d(rows, theirs, assume_unique=True)
+            if rows.size:  # the subsets with a detection in the gate, whole (a bending column)
+                Gj = G - np.mean(R_all, axis=0) + R_all[rows]
+                gated = _mahalanobis(scan.z[rows] - c, Gj) <= cfg.gate_threshold
+                subsets = [
+                    rows[s]
+                    for s in resolution_subsets(scan.z[rows], cfg.resolution_distance)
+                    if gated[s].any()
+                ]
+                rows = np.sort(np.concatenate(subsets)) if subsets else rows[:0]
             chosen = np.zeros(0, dtype=np.intp)
             left_out: list[np.ndarray] = []
             gain = -track.gamma  # ΔL(∅)
             if rows.size:
-                subsets = resolution_subsets(scan.z[rows], cfg.resolution_distance)
+                subsets = [np.searchsorted(rows, s) for s in subsets]  # as positions in rows
                 G1 = gate_covariance(est, np.mean(R_all[rows], axis=0), cfg.z_scale)
                 fit = []
                 for s in subsets:
@@ -386,7 +448,9 @@ class ExtendedTracker:
                     Rm = np.mean(R_all[W], axis=0)
                     g = (
                         _log_poisson(W.size, track.gamma)
-                        + subset_log_likelihood(est, scan.z[W], Rm, cfg.z_scale)
+                        + subset_log_likelihood(
+                            est, scan.z[W], Rm, cfg.z_scale, extent_uncertain=True
+                        )
                         - W.size * log_lam
                     )
                     if g > gain:
@@ -421,6 +485,7 @@ class ExtendedTracker:
                 split_centroid=split_c,
                 split_radius=split_m,
                 split_time=t,
+                origin=track.origin,
             )
             if evidence >= SPLIT_SCANS and not claimed[split_rows].any():
                 claimed[split_rows] = True
@@ -447,6 +512,7 @@ class ExtendedTracker:
         spawned = []
         deleted.extend(merged)
         # Hybridization: resolution cells and absorbed individual tracks.
+        before, seen = dict(state.absorbing), {}
         if len(view):
             xy, vel = view.x[:, :2], view.x[:, 2:4]
             for track in kept:
@@ -462,11 +528,15 @@ class ExtendedTracker:
                     )
                 )
                 d = xy - est.x[:2]
-                inside = _mahalanobis(d, est.X) <= 1.0
-                if established and inside.any():
-                    idx = np.flatnonzero(inside)
-                    # a confirmed track must move with it within the spread itself; a
-                    # tentative one within its uncertainty too
+                # tracks that its own detections started since its cluster was first seen,
+                # anywhere in its resolution cell
+                own = (view.created >= track.origin) & (_mahalanobis(d, cells[-1].matrix) <= 1.0)
+                take.update(view.ids[i] for i in np.flatnonzero(own).tolist())
+                inside = (_mahalanobis(d, est.X) <= 1.0) & ~own
+                idx = np.flatnonzero(inside)
+                if established and idx.size:
+                    # a confirmed track must move with it within the spread itself, for
+                    # ABSORB_SCANS scans in a row; a tentative one within its uncertainty too
                     sigmas = np.where(view.confirmed[idx], 0.0, 1.0)
                     moving = _moves_with(
                         vel[idx],
@@ -476,7 +546,14 @@ class ExtendedTracker:
                         cfg.group_speed_spread,
                         sigmas,
                     )
-                    take.update(view.ids[i] for i in idx[moving].tolist())
+                    for i in idx[moving].tolist():
+                        tid = view.ids[i]
+                        if not view.confirmed[i]:
+                            take.add(tid)
+                        else:
+                            seen[tid] = before.get(tid, 0) + 1
+                            if seen[tid] >= ABSORB_SCANS:
+                                take.add(tid)
         absorbed = tuple(sorted(take))
         index = view.index()
         gone = tuple(tid for tid in absorbed if view.confirmed[index[tid]])
@@ -485,7 +562,14 @@ class ExtendedTracker:
         for _, rows in born:
             claimed[rows] = True
         tracks = tuple(kept) + tuple(spawned) + tuple(track for track, _ in born)
-        new_state = replace(state, tracks=tracks, candidates=candidates, next_id=next_id, time=t)
+        new_state = replace(
+            state,
+            tracks=tracks,
+            candidates=candidates,
+            next_id=next_id,
+            time=t,
+            absorbing=tuple((tid, k) for tid, k in seen.items() if tid not in take),
+        )
         return PeerProposal(
             claimed=claimed,
             cells=tuple(cells),
@@ -506,66 +590,77 @@ class ExtendedTracker:
                 np.take(scan.z, free, axis=0), cfg.resolution_distance, cfg.min_detections
             )
         ]
-        if clusters:
-            clusters = [
-                rows
-                for rows in _group_clusters(clusters, point_gates(), cfg)
-                if rows.size >= cfg.min_detections
-            ]
         centroids = np.array([scan.z[r].mean(axis=0) for r in clusters]).reshape(-1, 2)
-        used = np.zeros(len(clusters), dtype=bool)
+        # Each cluster's run: the candidate it continues (nearest to its prediction).
+        match: list[_Candidate | None] = [None] * len(clusters)
         candidates: list[_Candidate] = []
-        born: list[tuple[ExtendedTrack, np.ndarray]] = []
         for cand in state.candidates:
             dt = t - cand.time
-            if dt <= 0 or not clusters:
-                if dt <= 0:
-                    candidates.append(cand)
+            if dt <= 0:
+                candidates.append(cand)
                 continue
-            pred = cand.centroid + dt * cand.velocity
+            if not clusters:
+                continue
+            pred = cand.predicted(t)
             reach = cfg.resolution_distance + (
                 cfg.max_speed * dt if cand.seen == 1 else 2.0 * cfg.group_speed_spread * dt
             )
             d = np.hypot(*(centroids - pred).T)
-            d[used] = np.inf
+            d[[m is not None for m in match]] = np.inf
             k = int(np.argmin(d))
-            if d[k] > reach:
-                continue  # not seen this scan: the run is broken
-            used[k] = True
-            velocity = (centroids[k] - cand.centroid) / dt
-            if np.hypot(*velocity) > cfg.max_speed:
+            if d[k] <= reach:  # else not seen this scan: the run is broken
+                match[k] = cand
+        # A confirmed individual track explains detections of a cluster only if it is older
+        # than the cluster's run: tracks that the cluster's own detections confirmed (clutter
+        # that a point tracker takes for targets) hold nothing back.
+        if clusters:
+            since = np.array([t if m is None else m.first_time for m in match])
+            clusters = _group_clusters(clusters, point_gates(), cfg, since)
+        born: list[tuple[ExtendedTrack, np.ndarray]] = []
+        for k, rows in enumerate(clusters):
+            if rows.size < cfg.min_detections:
                 continue
-            if cand.seen > 1:
-                velocity = 0.5 * (velocity + cand.velocity)
-            seen = cand.seen + 1
-            if seen >= cfg.birth_scans and t - cand.first_time >= BIRTH_MIN_SPAN:
+            centroid = scan.z[rows].mean(axis=0)
+            cand = match[k]
+            if cand is None:
+                candidates.append(_Candidate.first(centroid, t))
+                continue
+            run = cand.seen_again(centroid, t)
+            velocity = run.velocity
+            if np.hypot(*velocity) > cfg.max_speed:
+                candidates.append(_Candidate.first(centroid, t))
+                continue
+            if run.seen >= cfg.birth_scans and t - run.first_time >= BIRTH_MIN_SPAN:
                 track = _born(
                     f"E{next_id}",
                     scan,
-                    clusters[k],
+                    rows,
                     velocity,
                     False,
                     initial_score(tm.new_target_density, tm.clutter_density),
-                    float(clusters[k].size),
+                    float(rows.size),
                     cfg,
                     tm,
+                    origin=run.first_time,
                 )
-                born.append((track, clusters[k]))
+                born.append((track, rows))
                 next_id += 1
             else:
-                candidates.append(_Candidate(centroids[k], velocity, cand.first_time, t, seen))
-        for k in np.flatnonzero(~used).tolist():
-            candidates.append(_Candidate(centroids[k], np.zeros(2), t, t, 1))
+                candidates.append(run)
         return born, tuple(candidates), next_id
 
 
 def _group_clusters(
-    clusters: list[np.ndarray], pg: _PointGates, cfg: ExtendedConfig
+    clusters: list[np.ndarray],
+    pg: _PointGates,
+    cfg: ExtendedConfig,
+    since: np.ndarray | None = None,
 ) -> list[np.ndarray]:
     """The detections of each cluster (rows of the scan) that a group may hold: those no
     confirmed individual track explains, and those of confirmed tracks that move together
     (within ``group_speed_spread`` of the median velocity of the cluster's tracks, two
-    tracks at least). All clusters at once, in array operations."""
+    tracks at least). With ``since`` (one time per cluster), only tracks created before it
+    explain that cluster's detections. All clusters at once, in array operations."""
     if pg.det.size == 0:
         return clusters
     K, m = len(clusters), pg.rows.size
@@ -573,6 +668,8 @@ def _group_clusters(
     which[np.concatenate(clusters)] = np.repeat(np.arange(K), [r.size for r in clusters])
     c = which[pg.det]
     inside = c >= 0
+    if since is not None:
+        inside[inside] = pg.created[pg.trk[inside]] < since[c[inside]]
     if not inside.any():
         return clusters
     c, det, trk = c[inside], pg.det[inside], pg.trk[inside]
@@ -640,23 +737,26 @@ def _merge(
     tracks: list[ExtendedTrack], cfg: ExtendedConfig
 ) -> tuple[list[ExtendedTrack], list[str]]:
     """Tracks that have become one: where a track's centroid lies inside another's extent
-    (grown by half the resolution distance) and both move alike, the one with fewer hits goes.
-    Returns the tracks kept and the ids of confirmed tracks removed."""
+    (grown by half the resolution distance) and both move alike, they become one track with
+    the id, hits and history of the one with more hits and the moment-matched estimate of
+    both (:func:`~trackers.extended.random_matrix.merged`, weighted by their expected
+    detections; their expected detections add up). Returns the tracks kept and the ids of
+    confirmed tracks removed."""
     if len(tracks) < 2:
         return tracks, []
+    tracks = list(tracks)
     gone: set[int] = set()
     order = sorted(range(len(tracks)), key=lambda i: (-tracks[i].hits, tracks[i].created))
     for a_pos, a in enumerate(order):
         if a in gone:
             continue
-        ea = tracks[a].estimate
-        M = _grown(ea.X, 0.5 * cfg.resolution_distance)
         for b in order[a_pos + 1 :]:
             if b in gone:
                 continue
-            eb = tracks[b].estimate
+            ta, tb = tracks[a], tracks[b]
+            ea, eb = ta.estimate, tb.estimate
             d = eb.x[:2] - ea.x[:2]
-            if _mahalanobis(d[None], M)[0] > 1.0:
+            if _mahalanobis(d[None], _grown(ea.X, 0.5 * cfg.resolution_distance))[0] > 1.0:
                 continue
             if _moves_with(
                 eb.x[None, 2:4],
@@ -666,6 +766,18 @@ def _merge(
                 cfg.group_speed_spread,
             )[0]:
                 gone.add(b)
+                tracks[a] = replace(
+                    ta,
+                    estimate=merged((ea, eb), (ta.gamma, tb.gamma), cfg.z_scale),
+                    gamma=ta.gamma + tb.gamma,
+                    score=max(ta.score, tb.score),
+                    peak=max(ta.peak, tb.peak),
+                    confirmed=ta.confirmed or tb.confirmed,
+                    created=min(ta.created, tb.created),
+                    origin=min(ta.origin, tb.origin),
+                    detection_ids=ta.detection_ids + tb.detection_ids,
+                    split_evidence=0,
+                )
     kept = [tr for i, tr in enumerate(tracks) if i not in gone]
     return kept, [tracks[i].id for i in sorted(gone) if tracks[i].confirmed]
 
@@ -681,8 +793,10 @@ def _born(
     cfg: ExtendedConfig,
     tm: TrackManagementConfig,
     velocity_std: float = BIRTH_VELOCITY_STD,
+    origin: float | None = None,
 ) -> ExtendedTrack:
-    """A new track from the detections ``rows`` of ``scan`` moving at ``velocity``."""
+    """A new track from the detections ``rows`` of ``scan`` moving at ``velocity``;
+    ``origin`` the time its cluster was first seen (default: now)."""
     Z = scan.z[rows]
     n = Z.shape[0]
     Rm = np.mean(scan.R[rows], axis=0)
@@ -692,7 +806,9 @@ def _born(
     w, V = np.linalg.eigh(0.5 * (X + X.T))
     floor = float(np.max(np.linalg.eigvalsh(Rm)))
     X = (V * np.maximum(w, floor)) @ V.T
-    pos_var = float(np.trace(spread)) / (2.0 * n) + floor
+    # the centroid of what was seen, not yet of the whole: the object may reach a resolution
+    # distance beyond its detections on any side, so the centroid is uncertain by half of it
+    pos_var = max(float(np.trace(spread)) / (2.0 * n) + floor, (0.5 * cfg.resolution_distance) ** 2)
     P = np.diag([pos_var, pos_var, velocity_std**2, velocity_std**2])
     est = ExtendedEstimate(
         x=np.concatenate([c, np.asarray(velocity, dtype=float)]), P=P, X=X, alpha=2.0 + n
@@ -710,6 +826,7 @@ def _born(
         updated=t,
         gamma=max(MIN_GAMMA, gamma),
         detection_ids=_ids(scan, rows),
+        origin=t if origin is None else float(origin),
     )
 
 
