@@ -309,7 +309,7 @@ class ExtendedConfig:
 
     enabled: bool = _field(True, "track extended objects and groups alongside individual targets")
     q: float = _field(0.5, "centroid acceleration noise PSD, m²/s³", gt=0, le=1e4)
-    tau: float = _field(20.0, "time constant of extent changes, s", gt=0, le=1e6)
+    tau: float = _field(10.0, "time constant of extent changes, s", gt=0, le=1e6)
     z_scale: float = _field(
         0.25, "spread of the detections relative to the extent (1/4: uniform)", gt=0, le=10.0
     )

@@ -151,6 +151,13 @@ class _Candidate:
         den = n * s2 - s1 * s1
         return (n * stc - s1 * sc) / den if n > 1 and den > 0 else np.zeros(2)
 
+    def velocity_std(self, centroid_std: float) -> float:
+        """Standard deviation of the slope for centroids uncertain by ``centroid_std`` (m):
+        ``σ_c / √(Στ² − (Στ)²/n)`` (infinite for one centroid)."""
+        n, s1, s2, _, _ = self.sums
+        spread = s2 - s1 * s1 / n
+        return centroid_std / math.sqrt(spread) if spread > 0 else math.inf
+
     def predicted(self, t: float) -> np.ndarray:
         """The line's centroid at ``t``: ``Σc/n + v (t − t₀ − Στ/n)``."""
         n, s1, _, sc, _ = self.sums
@@ -641,6 +648,10 @@ class ExtendedTracker:
                     float(rows.size),
                     cfg,
                     tm,
+                    velocity_std=min(
+                        cfg.max_speed,
+                        max(BIRTH_VELOCITY_STD, run.velocity_std(0.5 * cfg.resolution_distance)),
+                    ),
                     origin=run.first_time,
                 )
                 born.append((track, rows))
