@@ -41,7 +41,9 @@ def test_a_moving_cluster_becomes_one_confirmed_extended_track():
     assert np.hypot(*(np.array(e.position) - centre)) < 30.0
     assert np.hypot(*(np.array(e.velocity) - [10.0, 0.0])) < 3.0
     major, minor = e.extent.semi_axes
-    assert 120 < major < 230 and minor < 40  # uniform 300 m x 30 m block: about 173 x 17 m
+    # uniform 300 m x 30 m block: about 173 x 17 m; a false alarm within the resolution
+    # distance (200 m) of the block joins its subset now and then and widens the minor axis
+    assert 120 < major < 230 and minor < 50
     assert abs(np.sin(e.extent.orientation)) < 0.1
     assert len(e.detection_ids) >= 6
     # its detections start no individual track
