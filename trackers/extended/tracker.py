@@ -70,7 +70,7 @@ __all__ = [
 ]
 
 #: Scans in a row a separated subset must be left out before it becomes a track of its own.
-SPLIT_SCANS = 2
+SPLIT_SCANS = 3
 #: Scans in a row a confirmed individual track must be inside a confirmed extended track's
 #: extent and moving with it before it is absorbed (a vehicle passing alongside is not).
 ABSORB_SCANS = 3
@@ -440,6 +440,7 @@ class ExtendedTracker:
                 ]
                 rows = np.sort(np.concatenate(subsets)) if subsets else rows[:0]
             chosen = np.zeros(0, dtype=np.intp)
+            parts: list[np.ndarray] = []
             left_out: list[np.ndarray] = []
             gain = -track.gamma  # ΔL(∅)
             if rows.size:
@@ -466,16 +467,22 @@ class ExtendedTracker:
                     chosen = rows[best]
                     in_best = np.zeros(rows.size, dtype=bool)
                     in_best[best] = True
+                    parts = [rows[s] for s in subsets if in_best[s].any()]
                     left_out = [rows[s] for s in subsets if not in_best[s].any() and s.size >= 2]
             score = track.score + gain
+            evidence, split_rows, split_c, split_d, split_v = _split_evidence(
+                track, scan, parts, left_out, t, cfg
+            )
+            splitting = evidence >= SPLIT_SCANS and not claimed[split_rows].any()
+            if splitting:  # the parent keeps the rest, its extent fitted to it afresh
+                chosen = np.setdiff1d(chosen, split_rows, assume_unique=True)
+                if chosen.size:
+                    est = replace(est, X=_spread_extent(scan, chosen, cfg), alpha=2.0 + chosen.size)
             n = int(chosen.size)
             gamma = max(MIN_GAMMA, track.gamma + GAMMA_GAIN * (n - track.gamma))
             if n:
                 claimed[chosen] = True
                 est = update(est, scan.z[chosen], np.mean(R_all[chosen], axis=0), cfg.z_scale)
-            evidence, split_rows, split_c, split_m, split_v = _split_evidence(
-                track, est, scan, left_out, t, cfg
-            )
             new = ExtendedTrack(
                 id=track.id,
                 estimate=est,
@@ -488,13 +495,13 @@ class ExtendedTracker:
                 updated=t if n else track.updated,
                 gamma=gamma,
                 detection_ids=_ids(scan, chosen),
-                split_evidence=0 if evidence >= SPLIT_SCANS else evidence,
+                split_evidence=0 if splitting else evidence,
                 split_centroid=split_c,
-                split_radius=split_m,
+                split_radius=split_d,
                 split_time=t,
                 origin=track.origin,
             )
-            if evidence >= SPLIT_SCANS and not claimed[split_rows].any():
+            if splitting:
                 claimed[split_rows] = True
                 child = _born(
                     f"E{next_id}",
@@ -708,40 +715,75 @@ def _group_clusters(
 
 def _split_evidence(
     track: ExtendedTrack,
-    est: ExtendedEstimate,
     scan: Scan,
+    parts: list[np.ndarray],
     left_out: list[np.ndarray],
     t: float,
     cfg: ExtendedConfig,
 ) -> tuple[int, np.ndarray, tuple[float, float], float, np.ndarray]:
-    """The split evidence after this scan: of the subsets left out of the track's detections,
-    the one farthest outside its extent, in extent radii ``m = √((c_s − c)ᵀ X⁻¹ (c_s − c))``;
-    the evidence grows when it is outside (``m > 1``) and farther than the subset seen at the
-    previous scan (a group moving away, not a column bending round a corner). Returns the
-    evidence, the subset's rows, its centroid, ``m`` and its velocity from the two scans."""
+    """The split evidence after this scan (paper 002: an extent that grows because its
+    detections fall apart into separated subsets is a group separating). The *main* part is
+    the largest subset of the track's chosen detections ``parts``; of the other subsets of at
+    least two detections, chosen or left out, the one farthest from it (centroid distance, the gap,
+    more than the resolution distance by construction of the subsets) is the separating one.
+    The evidence grows when the gap is larger than at the previous scan and the subset is
+    where the previous one could have gone at the parent's speed (plus twice
+    ``group_speed_spread``, and half a resolution distance of jitter): a group moving away; a
+    gap that a missed vehicle
+    leaves in a column closes again, and a column bending round a corner stays one subset).
+    Returns the evidence, the subset's rows, its centroid, the gap and its velocity from the two
+    scans."""
     none = (0, np.zeros(0, dtype=np.intp), (0.0, 0.0), 0.0, np.zeros(2))
-    if not left_out:
+    if not parts:
         return none
-    c = est.x[:2]
-    Xinv = np.linalg.inv(est.X)
-    best, best_m, best_c = None, 1.0, None
-    for rows in left_out:
-        cs = scan.z[rows].mean(axis=0)
-        d = cs - c
-        m = math.sqrt(max(0.0, float(d @ Xinv @ d)))
-        if m > best_m:
-            best, best_m, best_c = rows, m, cs
-    if best is None or best_c is None:
-        return none
-    evidence, velocity = 1, est.x[2:4].copy()
+    velocity = track.estimate.x[2:4].copy()
     dt = t - track.split_time
-    if track.split_evidence and dt > 0:
+    # a group driving off keeps about the parent's speed
+    reach = float(np.hypot(*velocity)) + 2.0 * cfg.group_speed_spread
+    everyone = parts + left_out
+    centroid = {id(r): scan.z[r].mean(axis=0) for r in everyone}
+    if track.split_evidence and dt > 0:  # the subset that was separating, if it still is
         prev = np.asarray(track.split_centroid)
-        moved = float(np.hypot(*(best_c - prev)))
-        if best_m > track.split_radius and moved <= cfg.resolution_distance + cfg.max_speed * dt:
-            evidence = track.split_evidence + 1
-            velocity = (best_c - prev) / dt
-    return evidence, best, (float(best_c[0]), float(best_c[1])), best_m, velocity
+        near = [
+            r
+            for r in everyone
+            if r.size >= 2
+            and np.hypot(*(centroid[id(r)] - prev)) <= 0.5 * cfg.resolution_distance + reach * dt
+        ]
+        if near:
+            rows = min(near, key=lambda r: float(np.hypot(*(centroid[id(r)] - prev))))
+            rest = [r for r in parts if r is not rows]
+            if rest:
+                main = max(rest, key=lambda r: r.size)
+                cs = centroid[id(rows)]
+                gap = float(np.hypot(*(cs - centroid[id(main)])))
+                if gap > track.split_radius:
+                    evidence = track.split_evidence + 1
+                    return evidence, rows, (float(cs[0]), float(cs[1])), gap, (cs - prev) / dt
+    main = max(parts, key=lambda r: r.size)
+    others = [r for r in everyone if r is not main and r.size >= 2]
+    if not others:
+        return none
+    c_main = centroid[id(main)]
+    rows = max(others, key=lambda r: float(np.hypot(*(centroid[id(r)] - c_main))))
+    cs = centroid[id(rows)]
+    gap = float(np.hypot(*(cs - c_main)))
+    return 1, rows, (float(cs[0]), float(cs[1])), gap, velocity
+
+
+def _spread_extent(scan: Scan, rows: np.ndarray, cfg: ExtendedConfig) -> np.ndarray:
+    """The extent that the detections ``rows`` spread over: ``(Ȳ/(n − 1) − R̄) / z``, each
+    eigenvalue at least R̄'s largest (``n ≥ 2``; R̄'s largest times the identity for one)."""
+    Z = scan.z[rows]
+    n = Z.shape[0]
+    Rm = np.mean(scan.R[rows], axis=0)
+    floor = float(np.max(np.linalg.eigvalsh(Rm)))
+    if n < 2:
+        return np.eye(2) * floor
+    c = Z.mean(axis=0)
+    X = ((Z - c).T @ (Z - c) / (n - 1) - Rm) / cfg.z_scale
+    w, V = np.linalg.eigh(0.5 * (X + X.T))
+    return (V * np.maximum(w, floor)) @ V.T
 
 
 def _merge(
