@@ -118,6 +118,8 @@ class ExtendedTrack:
     #: When its detections were first seen together (its cluster's first scan, before it was
     #: born); individual tracks created since, inside its extent, came from its detections.
     origin: float = math.inf
+    #: Individual tracks seen coming up to it from outside its resolution cell.
+    visitors: frozenset[str] = frozenset()
 
 
 @dataclass(frozen=True, eq=False)
@@ -500,6 +502,7 @@ class ExtendedTracker:
                 split_radius=split_d,
                 split_time=t,
                 origin=track.origin,
+                visitors=track.visitors,
             )
             if splitting:
                 claimed[split_rows] = True
@@ -527,26 +530,39 @@ class ExtendedTracker:
         deleted.extend(merged)
         # Hybridization: resolution cells and absorbed individual tracks.
         before, seen = dict(state.absorbing), {}
+        step = t - state.time if state.time is not None and t > state.time else 0.0
         if len(view):
             xy, vel = view.x[:, :2], view.x[:, 2:4]
-            for track in kept:
+            live = set(view.ids)
+            for pos, track in enumerate(kept):
+                est = track.estimate
+                d = xy - est.x[:2]
+                cell = _grown(est.X, 0.5 * cfg.resolution_distance)
+                in_cell = _mahalanobis(d, cell) <= 1.0
+                # visitors: individual tracks seen near it but outside its cell (a vehicle
+                # coming up to it), which never count as started by its own detections
+                watch = _grown(est.X, 0.5 * cfg.resolution_distance + cfg.max_speed * step)
+                near_out = (_mahalanobis(d, watch) <= 1.0) & ~in_cell
+                visitors = frozenset(v for v in track.visitors if v in live) | {
+                    view.ids[i] for i in np.flatnonzero(near_out).tolist()
+                }
+                if visitors != track.visitors:
+                    kept[pos] = track = replace(track, visitors=visitors)
                 if not track.confirmed:
                     continue
-                est = track.estimate
                 established = track.hits >= cfg.birth_scans and t - track.created >= BIRTH_MIN_SPAN
-                cells.append(
-                    ResolutionCell(
-                        center=est.x[:2],
-                        matrix=_grown(est.X, 0.5 * cfg.resolution_distance),
-                        pd=cfg.in_cell_pd,
-                    )
+                cells.append(ResolutionCell(center=est.x[:2], matrix=cell, pd=cfg.in_cell_pd))
+                # tracks that its own detections started since its cluster was first seen:
+                # in its cell, never seen coming, no faster than a group
+                own = (
+                    in_cell
+                    & (view.created >= track.origin)
+                    & (np.hypot(vel[:, 0], vel[:, 1]) <= cfg.max_speed)
                 )
-                d = xy - est.x[:2]
-                # tracks that its own detections started since its cluster was first seen,
-                # anywhere in its resolution cell
-                own = (view.created >= track.origin) & (_mahalanobis(d, cells[-1].matrix) <= 1.0)
-                take.update(view.ids[i] for i in np.flatnonzero(own).tolist())
-                inside = (_mahalanobis(d, est.X) <= 1.0) & ~own
+                take.update(
+                    view.ids[i] for i in np.flatnonzero(own).tolist() if view.ids[i] not in visitors
+                )
+                inside = (_mahalanobis(d, est.X) <= 1.0) & ~np.isin(view.ids, list(take))
                 idx = np.flatnonzero(inside)
                 if established and idx.size:
                     # a confirmed track must move with it within the spread itself, for
@@ -828,6 +844,7 @@ def _merge(
                     confirmed=ta.confirmed or tb.confirmed,
                     created=min(ta.created, tb.created),
                     origin=min(ta.origin, tb.origin),
+                    visitors=ta.visitors | tb.visitors,
                     detection_ids=ta.detection_ids + tb.detection_ids,
                     split_evidence=0,
                 )
