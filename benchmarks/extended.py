@@ -5,7 +5,7 @@ tracker on the same detections.
 
 Runs the convoy and harbour scenarios of :mod:`clients.scenarios.extended` through the
 pipeline with every track kind (``TrackingPipeline.all_kinds``, the service's) and through the
-individual tracker alone, and prints side by side, per scenario and averaged over seeds:
+individual tracker alone, and prints side by side, per scenario, per seed and averaged over seeds:
 
 - false confirmed individual tracks per scan (more than 50 m from every true target);
 - convoy: the extended tracks that held the convoy before its split (the nearest to its
@@ -13,8 +13,12 @@ individual tracker alone, and prints side by side, per scenario and averaged ove
   each sub-convoy has an extended track within 150 m of its centroid;
 - convoy: the track breaks of the overtaking vehicle (scans at which the individual track
   nearest to it, within 50 m, is another than at its previous scan, or there is none);
+- convoy: false individual tracks within 300 m of a convoy member per scan, once the convoy
+  has had a confirmed extended track (those its detections could start);
 - harbour: the extended tracks that held the backwash (within 150 m of its centre) after the
-  first 20 scans;
+  first 20 scans, and the times the extended track nearest the boat (within 100 m) changed
+  or was missing;
+- the reference scenario's time per scan with extended tracking off and on (run alternately);
 - median milliseconds per scan, and one extended-track update with 20 detections.
 """
 
@@ -28,60 +32,11 @@ import timeit
 
 import numpy as np
 
-from clients.scenarios.extended import convoy_scenario, harbour_scenario
+from clients.scenarios.extended import convoy_scenario, harbour_scenario, run_figures
+from clients.scenarios.multitarget import reference_scenario, simulate
+from trackers.config import TrackerConfig
 from trackers.extended.random_matrix import ExtendedEstimate, update
 from trackers.pipeline import TrackingPipeline
-
-
-def _run(run, pipeline, convoy: bool) -> dict[str, float]:
-    times, false, scans = [], 0, 0
-    held, errors, split_found = set(), [], {}
-    backwash: set[str] = set()
-    prev_ovt, breaks, ovt_scans = None, 0, 0
-    centre = None if run.scans[0].clutter_region is None else run.scans[0].clutter_region.mean(0)
-    for k, ts in enumerate(run.scans):
-        sim = ts.scan
-        start = time.perf_counter()
-        result = pipeline.process(sim.to_scan())
-        times.append(1e3 * (time.perf_counter() - start))
-        conf = result.confirmed()
-        X = sim.truth_states[:, :2]
-        ext = [t for t in conf if t.kind == "extended"]
-        ind = [t for t in conf if t.kind == "individual"]
-        false += sum(float(np.min(np.hypot(*(X - t.position).T))) > 50 for t in ind)
-        scans += 1
-        if convoy:
-            if 0 in ts.groups and ext:
-                c = ts.groups[0]
-                best = min(ext, key=lambda t: float(np.hypot(*(np.array(t.position) - c))))
-                held.add(best.id)
-                errors.append(float(np.hypot(*(np.array(best.position) - c))))
-            for g in (1, 2):
-                if g in ts.groups and g not in split_found:
-                    c = ts.groups[g]
-                    if any(np.hypot(*(np.array(t.position) - c)) < 150 for t in ext):
-                        split_found[g] = (sim.time - run.split_time) / 5.0
-            ids = list(sim.truth_ids)
-            if 9 in ids:
-                x9 = X[ids.index(9)]
-                near = [(float(np.hypot(*(np.array(t.position) - x9))), t.id) for t in ind]
-                near = [n for n in near if n[0] < 50]
-                now = min(near)[1] if near else None
-                if prev_ovt is not None:
-                    ovt_scans += 1
-                    breaks += now != prev_ovt
-                prev_ovt = now if now is not None else prev_ovt
-        elif centre is not None and k >= 20:
-            backwash |= {t.id for t in ext if np.hypot(*(np.array(t.position) - centre)) < 150}
-    out = {"false": false / scans, "ms": statistics.median(times)}
-    if convoy:
-        out["held"] = len(held)
-        out["rmse"] = float(np.sqrt(np.mean(np.square(errors)))) if errors else float("nan")
-        out["split"] = max(split_found.get(1, np.inf), split_found.get(2, np.inf))
-        out["breaks"] = breaks
-    else:
-        out["backwash"] = len(backwash)
-    return out
 
 
 def update_cost() -> float:
@@ -96,6 +51,43 @@ def update_cost() -> float:
     return 1e6 * min(runs) / 200
 
 
+def reference_overhead(seeds: int = 2, rounds: int = 3) -> tuple[float, float]:
+    """Median ms per scan of the reference scenario (no extended objects in it) through the
+    service's pipeline with extended tracking off and on, the two run alternately."""
+    times: dict[bool, list[float]] = {False: [], True: []}
+    for seed in range(seeds):
+        scans = [s.to_scan() for s in simulate(reference_scenario(seed))]
+        for _ in range(rounds):
+            for on in (False, True):
+                config = TrackerConfig().merged({"extended": {"enabled": on}})
+                pipeline = TrackingPipeline.all_kinds(config)
+                for scan in scans:
+                    start = time.perf_counter()
+                    pipeline.process(scan).confirmed()
+                    times[on].append(1e3 * (time.perf_counter() - start))
+    return statistics.median(times[False]), statistics.median(times[True])
+
+
+def _describe(label: str, r: dict[str, float], convoy: bool) -> str:
+    text = (
+        f"{label:<18} false individual tracks/scan {r['false']:.3f}, median {r['ms']:.1f} ms/scan"
+    )
+    if convoy and "held" in r and "rmse" in r:
+        text += (
+            f", near the convoy {r['near_false']:.3f}, tracks holding the convoy {r['held']:.1f},"
+            f" centroid RMSE {r['rmse']:.1f} m, both groups held {r['split']:.1f} scans after"
+            f" the split, overtaker breaks {r['breaks']:.1f}"
+        )
+    elif convoy:
+        text += f", near the convoy {r['near_false']:.3f}, overtaker breaks {r['breaks']:.1f}"
+    elif "boat_breaks" in r and label.startswith("hybrid"):
+        text += (
+            f", extended tracks on the backwash {r['backwash']:.1f}, boat track changes "
+            f"{r['boat_breaks']:.1f} (held at the end: {r['boat_held']:.0%})"
+        )
+    return text
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m benchmarks.extended", description=__doc__)
     parser.add_argument("--seeds", type=int, default=3)
@@ -105,27 +97,22 @@ def main(argv: list[str] | None = None) -> int:
         ("convoy", convoy_scenario, True),
         ("harbour", harbour_scenario, False),
     ):
-        rows = {"hybrid": [], "individual only": []}
+        rows: dict[str, list[dict[str, float]]] = {"hybrid": [], "individual only": []}
+        print(f"== {name}, {args.seeds} seeds")
         for seed in range(args.seeds):
             run = make(seed)
-            rows["hybrid"].append(_run(run, TrackingPipeline.all_kinds(), convoy))
-            rows["individual only"].append(_run(run, TrackingPipeline(), convoy))
-        print(f"== {name}, {args.seeds} seeds")
+            rows["hybrid"].append(run_figures(run, TrackingPipeline.all_kinds()))
+            rows["individual only"].append(run_figures(run, TrackingPipeline()))
+            for label in rows:
+                print("   " + _describe(f"{label} {seed}", rows[label][-1], convoy))
         for label, results in rows.items():
             mean = {k: float(np.mean([r[k] for r in results])) for k in results[0]}
-            text = f"   {label:<16} false individual tracks/scan {mean['false']:.3f}"
-            text += f", median {mean['ms']:.1f} ms/scan"
-            if convoy and label == "hybrid":
-                text += (
-                    f", tracks holding the convoy {mean['held']:.1f}, centroid RMSE "
-                    f"{mean['rmse']:.1f} m, both groups held {mean['split']:.1f} scans after "
-                    f"the split, overtaker breaks {mean['breaks']:.1f}"
-                )
-            elif convoy:
-                text += f", overtaker breaks {mean['breaks']:.1f}"
-            elif label == "hybrid":
-                text += f", extended tracks on the backwash {mean['backwash']:.1f}"
-            print(text)
+            print("   " + _describe(f"{label} mean", mean, convoy))
+    off, on = reference_overhead()
+    print(
+        f"== reference scenario (no extended objects), extended tracking off / on: {off:.2f} / "
+        f"{on:.2f} ms per scan ({100 * (on / off - 1):+.1f} %, target ≤ +10 %)"
+    )
     return 0
 
 

@@ -300,11 +300,14 @@ class ExtendedConfig:
     (1/4 for scatterers spread uniformly over the ellipse). Detections in a track's gate are
     split into subsets whose members are less than ``resolution_distance`` apart; the likeliest
     union of subsets is the track's. A cluster of at least ``min_detections`` detections, found
-    in ``birth_scans`` scans in a row moving as one, starts a track. Individual tracks inside a
-    track's resolution cell (its extent grown by half the resolution distance) have detection
-    probability ``in_cell_pd``; those inside its extent that move with it (velocities within
-    ``group_speed_spread``) are absorbed. A track is deleted like an individual one (the
-    sequential test of ``track_management``) or after ``max_coast_time`` without detections.
+    in ``birth_scans`` scans in a row spanning 10 s and moving as one (no faster than
+    ``max_speed``), starts a track. Individual tracks inside a track's resolution cell (its
+    extent grown by half the resolution distance) have detection probability ``in_cell_pd``;
+    those inside its extent that move with it (velocities within ``group_speed_spread``) for
+    3 scans, and those its own detections started (in its cell, created since its cluster was
+    first seen, never seen coming from outside), are absorbed. A track is deleted like an
+    individual one (the sequential test of ``track_management``) or after ``max_coast_time``
+    without detections.
     """
 
     enabled: bool = _field(True, "track extended objects and groups alongside individual targets")

@@ -76,9 +76,12 @@ motion, and the off-road stops of paper 002's sub-convoys.
 from __future__ import annotations
 
 import math
+import statistics
+import time
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from types import MappingProxyType
+from typing import Any
 
 import numpy as np
 
@@ -100,6 +103,7 @@ __all__ = [
     "ExtendedTruthScan",
     "convoy_scenario",
     "harbour_scenario",
+    "run_figures",
 ]
 
 ROAD_TURN_RADIUS = 25.0
@@ -662,3 +666,93 @@ def harbour_scenario(seed: int = 0) -> ExtendedScenarioRun:
             )
         )
     return ExtendedScenarioRun("harbour", tuple(scans), MappingProxyType(classes), None)
+
+
+def run_figures(run: ExtendedScenarioRun, pipeline: Any) -> dict[str, float]:
+    """Track ``run`` with ``pipeline`` (anything with ``process(Scan)`` returning a step
+    result, e.g. :class:`trackers.pipeline.TrackingPipeline`) and measure it. Always:
+    ``false``, confirmed individual tracks more than 50 m from every target per scan, and
+    ``ms``, the median milliseconds per scan. Convoy runs: ``near_false`` (those within 300 m
+    of a convoy member per scan once the convoy has had a confirmed extended track), ``held``
+    (extended tracks that were the nearest to the convoy's centroid before the split),
+    ``rmse`` (that centroid's error, m), ``split`` (scans after the split until both groups
+    have an extended track within 150 m), ``breaks`` (scans at which the overtaker's nearest
+    confirmed individual track within 50 m is another than before, or none). Harbour runs:
+    ``backwash`` (extended tracks within 150 m of the backwash after 20 scans), ``boat_breaks``
+    and ``boat_held`` (the same for the extended track nearest the boat, within 100 m)."""
+    convoy = run.split_time is not None
+    times, false, scans = [], 0, 0
+    held, errors, split_found = set(), [], {}
+    backwash: set[str] = set()
+    prev_ovt, breaks, ovt_scans = None, 0, 0
+    near_false, near_scans = 0, 0
+    boat = [i for i, c in run.target_class.items() if c == "boat"]
+    prev_boat, boat_breaks, boat_scans = None, 0, 0
+    centre = None if run.scans[0].clutter_region is None else run.scans[0].clutter_region.mean(0)
+    for k, ts in enumerate(run.scans):
+        sim = ts.scan
+        start = time.perf_counter()
+        result = pipeline.process(sim.to_scan())
+        times.append(1e3 * (time.perf_counter() - start))
+        conf = result.confirmed()
+        X = sim.truth_states[:, :2]
+        ext = [t for t in conf if t.kind == "extended"]
+        ind = [t for t in conf if t.kind == "individual"]
+        false += sum(float(np.min(np.hypot(*(X - t.position).T))) > 50 for t in ind)
+        scans += 1
+        ids = list(sim.truth_ids)
+        if convoy:
+            members = [
+                X[ids.index(i)]
+                for i in run.target_class
+                if run.target_class[i] == "convoy" and i in ids
+            ]
+            if held:  # the convoy has had a confirmed extended track
+                near_scans += 1
+                near_false += sum(
+                    float(np.min(np.hypot(*(X - t.position).T))) > 50
+                    and float(np.min(np.hypot(*(np.asarray(members) - t.position).T))) < 300
+                    for t in ind
+                )
+            if 0 in ts.groups and ext:
+                c = ts.groups[0]
+                best = min(ext, key=lambda t: float(np.hypot(*(np.array(t.position) - c))))
+                held.add(best.id)
+                errors.append(float(np.hypot(*(np.array(best.position) - c))))
+            for g in (1, 2):
+                if g in ts.groups and g not in split_found:
+                    c = ts.groups[g]
+                    if any(np.hypot(*(np.array(t.position) - c)) < 150 for t in ext):
+                        split_found[g] = (sim.time - run.split_time) / 5.0
+            if 9 in ids:
+                x9 = X[ids.index(9)]
+                near = [(float(np.hypot(*(np.array(t.position) - x9))), t.id) for t in ind]
+                near = [n for n in near if n[0] < 50]
+                now = min(near)[1] if near else None
+                if prev_ovt is not None:
+                    ovt_scans += 1
+                    breaks += now != prev_ovt
+                prev_ovt = now if now is not None else prev_ovt
+        else:
+            if centre is not None and k >= 20:
+                backwash |= {t.id for t in ext if np.hypot(*(np.array(t.position) - centre)) < 150}
+            if boat and boat[0] in ids:
+                xb = X[ids.index(boat[0])]
+                near = [(float(np.hypot(*(np.array(t.position) - xb))), t.id) for t in ext]
+                now = min(near)[1] if near and min(near)[0] < 100 else None
+                if prev_boat is not None:
+                    boat_scans += 1
+                    boat_breaks += now != prev_boat
+                prev_boat = now if now is not None else prev_boat
+    out = {"false": false / scans, "ms": statistics.median(times)}
+    if convoy:
+        out["held"] = len(held)
+        out["rmse"] = float(np.sqrt(np.mean(np.square(errors)))) if errors else float("nan")
+        out["split"] = max(split_found.get(1, np.inf), split_found.get(2, np.inf))
+        out["breaks"] = breaks
+        out["near_false"] = near_false / max(near_scans, 1)
+    else:
+        out["backwash"] = len(backwash)
+        out["boat_breaks"] = boat_breaks
+        out["boat_held"] = float(prev_boat is not None)
+    return out

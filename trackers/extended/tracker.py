@@ -127,43 +127,49 @@ class _Candidate:
     """A cluster seen in consecutive scans, not yet a track: its latest centroid, and the
     sums for the least-squares line ``c(t) = a + v (t − t₀)`` through its centroids (a
     cluster of clutter jitters by tens of metres a scan: a velocity from two centroids would
-    be off by tens of m/s)."""
+    be off by tens of m/s). Plain floats: a scan handles many of these."""
 
-    centroid: np.ndarray
+    centroid: tuple[float, float]
     first_time: float
     time: float
     seen: int
-    #: Σ1, Στ, Στ², Σc (2,), Στc (2,) over the centroids seen, τ = t − first_time.
-    sums: tuple[float, float, float, np.ndarray, np.ndarray]
+    #: Σ1, Στ, Στ², Σcx, Σcy, Στcx, Στcy over the centroids seen, τ = t − first_time.
+    sums: tuple[float, float, float, float, float, float, float]
 
     @classmethod
-    def first(cls, centroid: np.ndarray, t: float) -> _Candidate:
-        return cls(centroid, t, t, 1, (1.0, 0.0, 0.0, centroid.copy(), np.zeros(2)))
+    def first(cls, centroid: tuple[float, float], t: float) -> _Candidate:
+        cx, cy = centroid
+        return cls((cx, cy), t, t, 1, (1.0, 0.0, 0.0, cx, cy, 0.0, 0.0))
 
-    def seen_again(self, centroid: np.ndarray, t: float) -> _Candidate:
-        n, s1, s2, sc, stc = self.sums
+    def seen_again(self, centroid: tuple[float, float], t: float) -> _Candidate:
+        n, s1, s2, sx, sy, tx, ty = self.sums
+        cx, cy = centroid
         tau = t - self.first_time
-        sums = (n + 1.0, s1 + tau, s2 + tau * tau, sc + centroid, stc + tau * centroid)
-        return _Candidate(centroid, self.first_time, t, self.seen + 1, sums)
+        sums = (n + 1.0, s1 + tau, s2 + tau * tau, sx + cx, sy + cy, tx + tau * cx, ty + tau * cy)
+        return _Candidate((cx, cy), self.first_time, t, self.seen + 1, sums)
 
     @property
     def velocity(self) -> np.ndarray:
         """The line's slope ``v = (n Στc − Στ Σc) / (n Στ² − (Στ)²)`` (0 for one centroid)."""
-        n, s1, s2, sc, stc = self.sums
+        n, s1, s2, sx, sy, tx, ty = self.sums
         den = n * s2 - s1 * s1
-        return (n * stc - s1 * sc) / den if n > 1 and den > 0 else np.zeros(2)
+        if n < 2 or den <= 0:
+            return np.zeros(2)
+        return np.array([(n * tx - s1 * sx) / den, (n * ty - s1 * sy) / den])
 
     def velocity_std(self, centroid_std: float) -> float:
         """Standard deviation of the slope for centroids uncertain by ``centroid_std`` (m):
         ``σ_c / √(Στ² − (Στ)²/n)`` (infinite for one centroid)."""
-        n, s1, s2, _, _ = self.sums
+        n, s1, s2 = self.sums[:3]
         spread = s2 - s1 * s1 / n
         return centroid_std / math.sqrt(spread) if spread > 0 else math.inf
 
-    def predicted(self, t: float) -> np.ndarray:
+    def predicted(self, t: float) -> tuple[float, float]:
         """The line's centroid at ``t``: ``Σc/n + v (t − t₀ − Στ/n)``."""
-        n, s1, _, sc, _ = self.sums
-        return sc / n + self.velocity * (t - self.first_time - s1 / n)
+        n, s1, _, sx, sy, _, _ = self.sums
+        vx, vy = self.velocity
+        lag = t - self.first_time - s1 / n
+        return sx / n + vx * lag, sy / n + vy * lag
 
 
 @dataclass(frozen=True, eq=False)
@@ -620,7 +626,15 @@ class ExtendedTracker:
                 np.take(scan.z, free, axis=0), cfg.resolution_distance, cfg.min_detections
             )
         ]
-        centroids = np.array([scan.z[r].mean(axis=0) for r in clusters]).reshape(-1, 2)
+        if clusters:  # centroids in one pass: (Σ z over each cluster) / its size
+            sizes = np.array([r.size for r in clusters])
+            starts = np.cumsum(sizes) - sizes
+            zc = np.add.reduceat(np.take(scan.z, np.concatenate(clusters), axis=0), starts)
+            centroids = [
+                (x / k, y / k) for (x, y), k in zip(zc.tolist(), sizes.tolist(), strict=True)
+            ]
+        else:
+            centroids = []
         # Each cluster's run: the candidate it continues (nearest to its prediction).
         match: list[_Candidate | None] = [None] * len(clusters)
         candidates: list[_Candidate] = []
@@ -631,56 +645,60 @@ class ExtendedTracker:
                 continue
             if not clusters:
                 continue
-            pred = cand.predicted(t)
+            px, py = cand.predicted(t)
             reach = cfg.resolution_distance + (
                 cfg.max_speed * dt if cand.seen == 1 else 2.0 * cfg.group_speed_spread * dt
             )
-            d = np.hypot(*(centroids - pred).T)
-            d[[m is not None for m in match]] = np.inf
-            k = int(np.argmin(d))
-            if d[k] <= reach:  # else not seen this scan: the run is broken
-                match[k] = cand
-        # A confirmed individual track explains detections of a cluster only if it is older
-        # than the cluster's run: tracks that the cluster's own detections confirmed (clutter
-        # that a point tracker takes for targets) hold nothing back.
-        if clusters:
-            since = np.array([t if m is None else m.first_time for m in match])
-            clusters = _group_clusters(clusters, point_gates(), cfg, since)
+            best, best_d = -1, reach
+            for k, (cx, cy) in enumerate(centroids):
+                d = math.hypot(cx - px, cy - py)
+                if d <= best_d and match[k] is None:
+                    best, best_d = k, d
+            if best >= 0:  # else not seen this scan: the run is broken
+                match[best] = cand
         born: list[tuple[ExtendedTrack, np.ndarray]] = []
+        ripe: list[tuple[np.ndarray, _Candidate]] = []
         for k, rows in enumerate(clusters):
-            if rows.size < cfg.min_detections:
-                continue
-            centroid = scan.z[rows].mean(axis=0)
+            centroid = centroids[k]
             cand = match[k]
-            if cand is None:
+            run = None if cand is None else cand.seen_again(centroid, t)
+            if run is None or np.hypot(*run.velocity) > cfg.max_speed:
                 candidates.append(_Candidate.first(centroid, t))
-                continue
-            run = cand.seen_again(centroid, t)
-            velocity = run.velocity
-            if np.hypot(*velocity) > cfg.max_speed:
-                candidates.append(_Candidate.first(centroid, t))
-                continue
-            if run.seen >= cfg.birth_scans and t - run.first_time >= BIRTH_MIN_SPAN:
-                track = _born(
-                    f"E{next_id}",
-                    scan,
-                    rows,
-                    velocity,
-                    False,
-                    initial_score(tm.new_target_density, tm.clutter_density),
-                    float(rows.size),
-                    cfg,
-                    tm,
-                    velocity_std=min(
-                        cfg.max_speed,
-                        max(BIRTH_VELOCITY_STD, run.velocity_std(0.5 * cfg.resolution_distance)),
-                    ),
-                    origin=run.first_time,
-                )
-                born.append((track, rows))
-                next_id += 1
+            elif run.seen >= cfg.birth_scans and t - run.first_time >= BIRTH_MIN_SPAN:
+                ripe.append((rows, run))
             else:
                 candidates.append(run)
+        if not ripe:
+            return born, tuple(candidates), next_id
+        # A run that would start a track now: only the detections a group may hold count. A
+        # confirmed individual track explains detections of a cluster only if it is older than
+        # the cluster's run: tracks that the cluster's own detections confirmed (clutter that
+        # a point tracker takes for targets) hold nothing back. A run left with too few starts
+        # again.
+        since = np.array([run.first_time for _, run in ripe])
+        kept = _group_clusters([rows for rows, _ in ripe], point_gates(), cfg, since)
+        for rows, (_, run) in zip(kept, ripe, strict=True):
+            if rows.size < cfg.min_detections:
+                candidates.append(_Candidate.first(run.centroid, t))
+                continue
+            track = _born(
+                f"E{next_id}",
+                scan,
+                rows,
+                run.velocity,
+                False,
+                initial_score(tm.new_target_density, tm.clutter_density),
+                float(rows.size),
+                cfg,
+                tm,
+                velocity_std=min(
+                    cfg.max_speed,
+                    max(BIRTH_VELOCITY_STD, run.velocity_std(0.5 * cfg.resolution_distance)),
+                ),
+                origin=run.first_time,
+            )
+            born.append((track, rows))
+            next_id += 1
         return born, tuple(candidates), next_id
 
 

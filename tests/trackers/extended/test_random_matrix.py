@@ -15,6 +15,7 @@ from trackers.extended.random_matrix import (
     gate_covariance,
     innovation_covariance,
     inv_sqrtm_2x2,
+    merged,
     predict,
     sqrtm_2x2,
     subset_log_likelihood,
@@ -405,3 +406,61 @@ BAD_CALLS = {
 def test_bad_inputs_raise_value_error(call) -> None:
     with pytest.raises(ValueError):
         call()
+
+
+def test_merged_is_the_moment_matched_mixture() -> None:
+    a = ExtendedEstimate(
+        x=np.array([0.0, 0.0, 10.0, 0.0]), P=np.eye(4) * 4.0, X=np.diag([100.0, 25.0]), alpha=9
+    )
+    b = ExtendedEstimate(
+        x=np.array([40.0, 0.0, 12.0, 0.0]), P=np.eye(4) * 1.0, X=np.diag([400.0, 25.0]), alpha=6
+    )
+    m = merged((a, b), (3.0, 1.0), z_scale=0.25)
+    # weights 3/4 and 1/4: centroid 10 m along x, velocity 10.5 m/s
+    assert m.x == pytest.approx([10.0, 0.0, 10.5, 0.0])
+    # P = Σ w (P + d dᵀ): x offsets −10/+30, vx offsets −0.5/+1.5
+    assert m.P[0, 0] == pytest.approx(0.75 * (4 + 100) + 0.25 * (1 + 900))
+    assert m.P[0, 2] == pytest.approx(0.75 * 5.0 + 0.25 * 45.0)
+    assert m.P[1, 1] == pytest.approx(0.75 * 4 + 0.25 * 1)
+    # X = Σ w (X + d_c d_cᵀ / z)
+    assert m.X[0, 0] == pytest.approx(0.75 * (100 + 400) + 0.25 * (400 + 3600))
+    assert m.X[1, 1] == pytest.approx(25.0)
+    assert m.alpha == 6
+    same = merged((a, a), (1.0, 5.0))
+    assert same.x == pytest.approx(a.x) and pytest.approx(a.X) == same.X
+    with pytest.raises(ValueError):
+        merged((a, b), (0.0, 0.0))
+
+
+def test_extent_uncertain_likelihood_is_the_inverse_wishart_average() -> None:
+    """With the spread Y inverse-Wishart (ν = α + 3, mean z X + R), the contrasts' density
+    averaged over Y by Monte Carlo equals the closed form; for a large α it is the plug-in."""
+    from scipy.stats import invwishart
+
+    rng = np.random.default_rng(5)
+    Z = rng.normal(0.0, 20.0, (4, 2))
+    R = np.eye(2) * 25.0
+    est = ExtendedEstimate(x=np.zeros(4), P=np.eye(4) * 100.0, X=np.diag([1600.0, 900.0]), alpha=6)
+    # the centroid term is the same in both: compare differences from the plug-in
+    plug = subset_log_likelihood(est, Z, R)
+    marg = subset_log_likelihood(est, Z, R, extent_uncertain=True)
+    Yhat = 0.25 * est.X + R
+    c = Z - Z.mean(axis=0)
+    scatter = c.T @ c
+    Ys = invwishart(df=est.alpha + 3, scale=est.alpha * Yhat).rvs(size=200_000, random_state=6)
+    m = Z.shape[0] - 1
+    log_dens = (
+        -m * np.log(2 * np.pi)
+        - 0.5 * m * np.log(np.linalg.det(Ys))
+        - 0.5 * np.einsum("ij,nji->n", scatter, np.linalg.inv(Ys))
+    )
+    top = log_dens.max()
+    mc = top + np.log(np.mean(np.exp(log_dens - top)))
+    plug_contrasts = (
+        -m * np.log(2 * np.pi)
+        - 0.5 * m * np.log(np.linalg.det(Yhat))
+        - 0.5 * np.trace(np.linalg.solve(Yhat, scatter))
+    )
+    assert marg - plug == pytest.approx(mc - plug_contrasts, abs=0.02)
+    sure = ExtendedEstimate(x=est.x, P=est.P, X=est.X, alpha=1e7)
+    assert subset_log_likelihood(sure, Z, R, extent_uncertain=True) == pytest.approx(plug, abs=1e-4)

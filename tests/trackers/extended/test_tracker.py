@@ -2,10 +2,12 @@
 harbour scenario of clients/scenarios/extended.py (the convoy's targets are not met yet: see
 benchmarks/extended.py)."""
 
+import math
+
 import numpy as np
 import pytest
 
-from clients.scenarios.extended import harbour_scenario
+from clients.scenarios.extended import convoy_scenario, harbour_scenario, run_figures
 from trackers.config import TrackerConfig
 from trackers.extended.tracker import ExtendedTracker, extent_ellipse
 from trackers.pipeline import TrackingPipeline
@@ -90,32 +92,59 @@ def test_extent_ellipse_axes_and_orientation():
     assert e.orientation == pytest.approx(theta)
 
 
-def test_harbour_backwash_is_one_extended_track_and_false_tracks_fall():
-    run = harbour_scenario(0)
-    hybrid, alone = TrackingPipeline.all_kinds(), TrackingPipeline()
-    false_h = false_a = 0
-    backwash_ids = set()
-    corners = run.scans[0].clutter_region
-    centre = corners.mean(axis=0)
-    for k, ts in enumerate(run.scans):
-        scan = ts.scan.to_scan()
-        X = ts.scan.truth_states[:, :2]
-        for p in (hybrid, alone):
-            conf = p.process(scan).confirmed()
-            ind = [t for t in conf if t.kind == "individual"]
-            false = sum(np.min(np.hypot(*(X - t.position).T)) > 50 for t in ind)
-            if p is hybrid:
-                false_h += false
-                if k >= 20:
-                    backwash_ids |= {
-                        t.id
-                        for t in conf
-                        if t.kind == "extended" and np.hypot(*(np.array(t.position) - centre)) < 150
-                    }
-            else:
-                false_a += false
-    assert len(backwash_ids) == 1
-    assert false_h <= 0.2 * false_a  # at least 80 % fewer false confirmed tracks
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_harbour_backwash_is_one_extended_track_and_false_tracks_fall(seed):
+    run = harbour_scenario(seed)
+    hybrid = run_figures(run, TrackingPipeline.all_kinds())
+    alone = run_figures(run, TrackingPipeline())
+    assert hybrid["backwash"] == 1
+    assert hybrid["false"] <= 0.2 * alone["false"]  # at least 80 % fewer false confirmed tracks
+
+
+def test_convoy_is_one_track_through_both_junctions_and_splits_into_two():
+    """Convoy scenario, seed 0 (benchmarks/extended.py prints all its figures): one
+    extended track holds the convoy from its confirmation to the split, through both
+    junctions; both groups have an extended track within 150 m a few scans after the split;
+    its detections start next to no false individual track. (Not yet the issue's targets:
+    centroid RMSE 36 m here against 15 m, the split seen 3.4 scans after it against 3, and
+    the overtaking vehicle's track breaks.)"""
+    figures = run_figures(convoy_scenario(0), TrackingPipeline.all_kinds())
+    assert figures["held"] == 1
+    assert figures["rmse"] < 50.0
+    assert figures["split"] <= 5.0
+    assert figures["near_false"] < 0.05
+
+
+def test_a_vehicle_coming_up_to_a_group_keeps_its_track_as_it_passes():
+    """A block of detections moving east at 10 m/s becomes a confirmed extended track; a
+    vehicle 1.5 km behind at 18 m/s, 60 m to the side, overtakes it. Its individual track is
+    neither absorbed nor started anew: one id from before it reaches the group to after."""
+    rng = np.random.default_rng(11)
+    p = TrackingPipeline.all_kinds()
+    ids = []
+    for k in range(40):
+        centre = np.array([1000.0 + 50.0 * k, 500.0])
+        car = np.array([-500.0 + 90.0 * k, 560.0])
+        scan = _cluster_scan(k, rng, centre, clutter=20)
+        if rng.random() < 0.9:  # the car's detection
+            z = np.vstack([scan.z, car + rng.normal(0, 10.0, 2)])
+            scan = Scan(
+                "s",
+                scan.time,
+                z,
+                np.tile(R, (len(z), 1, 1)),
+                (*scan.detection_ids, f"car{k}"),
+                pd=0.9,
+                clutter_density=1e-6,
+            )
+        conf = p.process(scan).confirmed()
+        if k >= 8:
+            near = [
+                t.id for t in conf if t.kind == "individual" and np.hypot(*(t.position - car)) < 50
+            ]
+            ids.append(near[0] if near else None)
+    assert [t for t in conf if t.kind == "extended"]
+    assert None not in ids and len(set(ids)) == 1
 
 
 def _view_of(xy, v, confirmed):
@@ -159,3 +188,17 @@ def test_a_birth_cluster_keeps_tracks_moving_together_and_leaves_the_others_thei
         [np.array([0, 1, 2, 3, 6])], _PointGates(view, scan), TrackerConfig().extended
     )
     assert a.tolist() == [0, 1, 2, 3, 6]
+
+
+def test_a_birth_candidate_moves_along_the_least_squares_line_of_its_centroids():
+    from trackers.extended.tracker import _Candidate
+
+    run = _Candidate.first((0.0, 0.0), 0.0)
+    for t, c in ((5.0, (80.0, 0.0)), (10.0, (40.0, 10.0)), (15.0, (150.0, -10.0))):
+        run = run.seen_again(c, t)
+    # x through (0, 0), (5, 80), (10, 40), (15, 150): 6 + 8.2 t; y: 3 − 0.4 t
+    assert run.velocity == pytest.approx([8.2, -0.4])
+    assert run.predicted(20.0) == pytest.approx((6.0 + 8.2 * 20.0, 3.0 - 0.4 * 20.0))
+    # σ_v = σ_c / √Σ(τ − τ̄)² = 100 / √125
+    assert run.velocity_std(100.0) == pytest.approx(100.0 / math.sqrt(125.0))
+    assert _Candidate.first((1.0, 2.0), 3.0).velocity == pytest.approx([0.0, 0.0])
