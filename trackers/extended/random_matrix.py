@@ -239,6 +239,14 @@ def _detections(Z: np.ndarray) -> np.ndarray:
     return Z
 
 
+def _set_inputs(
+    est: ExtendedEstimate, Z: np.ndarray, R: np.ndarray, z_scale: float
+) -> tuple[np.ndarray, Sym, float, Sym]:
+    """The checked inputs of a set of detections: ``Z (n, 2)``, R's entries, z and X's
+    entries (raises ``ValueError`` as :func:`update` documents)."""
+    return _detections(Z), _spd(R, "R"), _z_scale(z_scale), _estimate(est)
+
+
 def _scatter(Z: np.ndarray) -> tuple[float, float, Sym]:
     """Mean ``ȳ`` and scatter ``Ȳ = Σ (yʲ − ȳ)(yʲ − ȳ)ᵀ`` of the rows of ``Z (n ≥ 1, 2)``."""
     ybar = Z.mean(axis=0)
@@ -335,10 +343,7 @@ def update(
         ValueError: wrong shapes, non-finite values, non-SPD R or X, ``z_scale ≤ 0``,
             ``α ≤ 0``.
     """
-    Z = _detections(Z)
-    ra, rb, rc = _spd(R, "R")
-    z = _z_scale(z_scale)
-    xa, xb, xc = _estimate(est)
+    Z, (ra, rb, rc), z, (xa, xb, xc) = _set_inputs(est, Z, R, z_scale)
     n = Z.shape[0]
     if n == 0:
         return est
@@ -490,10 +495,7 @@ def subset_log_likelihood(
         ValueError: ``n = 0``, wrong shapes, non-finite values, non-SPD R or X,
             ``z_scale ≤ 0``.
     """
-    Z = _detections(Z)
-    ra, rb, rc = _spd(R, "R")
-    z = _z_scale(z_scale)
-    xa, xb, xc = _estimate(est)
+    Z, (ra, rb, rc), z, (xa, xb, xc) = _set_inputs(est, Z, R, z_scale)
     n = Z.shape[0]
     if n == 0:
         raise ValueError("subset_log_likelihood needs at least one detection")

@@ -39,13 +39,14 @@ velocity and extent prior; such a track is confirmed at once.
 
 from __future__ import annotations
 
-import itertools
 import math
 from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy.spatial import cKDTree
 
+from trackers.association.gating import max_eigenvalue_2x2
+from trackers.association.spatial import pairs_within
 from trackers.config import ExtendedConfig, TrackerConfig, TrackManagementConfig
 from trackers.extended.partition import nested_unions, resolution_subsets
 from trackers.extended.random_matrix import (
@@ -69,7 +70,7 @@ __all__ = [
     "snapshot_of",
 ]
 
-#: Scans in a row a separated subset must be left out before it becomes a track of its own.
+#: Scans in a row a separated subset must move away before it becomes a track of its own.
 SPLIT_SCANS = 3
 #: Scans in a row a confirmed individual track must be inside a confirmed extended track's
 #: extent and moving with it before it is absorbed (a vehicle passing alongside is not).
@@ -79,9 +80,6 @@ ABSORB_SCANS = 3
 BIRTH_MIN_SPAN = 10.0
 #: Gate (χ²₂, 99 %) of a confirmed individual track that keeps its detections for it.
 POINT_GATE = 9.21
-#: Up to this many (detection, track) pairs, every pair is tested (no k-d tree: building and
-#: querying one costs more than testing a few thousand pairs outright).
-BRUTE_FORCE_PAIRS = 4096
 #: Weight of the latest scan's detection count in the expected count γ.
 GAMMA_GAIN = 0.2
 #: Smallest expected detection count: keeps ln Poisson finite and a miss's cost positive.
@@ -108,12 +106,12 @@ class ExtendedTrack:
     updated: float
     gamma: float
     detection_ids: tuple[str, ...] = ()
-    #: Scans in a row that a subset left out of the track's detections has been seen outside
-    #: its extent and moving away from it, with that subset's last centroid, its distance in
-    #: extent radii and the time.
+    #: Scans in a row that a subset of its detections (chosen or left out) has been moving away
+    #: from the largest one (:func:`_split_evidence`), with that subset's last centroid, its
+    #: gap (m) to the largest one and the time.
     split_evidence: int = 0
     split_centroid: tuple[float, float] = (0.0, 0.0)
-    split_radius: float = 0.0
+    split_gap: float = 0.0
     split_time: float = 0.0
     #: When its detections were first seen together (its cluster's first scan, before it was
     #: born); individual tracks created since, inside its extent, came from its detections.
@@ -208,13 +206,6 @@ def _log_poisson(n: int, gamma: float) -> float:
     return n * math.log(gamma) - gamma - math.lgamma(n + 1)
 
 
-def _largest_eigenvalue(S: np.ndarray) -> np.ndarray:
-    """The larger eigenvalue of each symmetric 2x2 matrix of ``S (n, 2, 2)``:
-    ``(a + c)/2 + √(((a − c)/2)² + b²)``."""
-    a, b, c = S[:, 0, 0], S[:, 0, 1], S[:, 1, 1]
-    return 0.5 * (a + c) + np.sqrt(0.25 * (a - c) ** 2 + b * b)
-
-
 def _mahalanobis(d: np.ndarray, S: np.ndarray) -> np.ndarray:
     """``dᵢᵀ Sᵢ⁻¹ dᵢ`` for ``d (n, 2)`` and ``S (n, 2, 2)`` or ``(2, 2)``, 2x2 written out."""
     S = np.broadcast_to(S, (d.shape[0], 2, 2))
@@ -226,8 +217,10 @@ def _mahalanobis(d: np.ndarray, S: np.ndarray) -> np.ndarray:
 
 class _PointGates:
     """The (detection, confirmed individual track) pairs of a scan where the detection lies in
-    the track's 99 % gate, found once per scan with a k-d tree over the tracks and held as two
-    index arrays (``det`` rows of the scan, ``trk`` indices into the confirmed tracks)."""
+    the track's 99 % gate, found once per scan (behind the spatial pre-gate of
+    :func:`trackers.association.spatial.pairs_within`) and held as index arrays: ``det`` rows
+    of the scan, ``trk`` indices into the confirmed tracks, ``m`` the squared Mahalanobis
+    distances."""
 
     def __init__(self, view: PointTrackView, scan: Scan) -> None:
         self.rows = np.flatnonzero(view.confirmed)
@@ -242,18 +235,11 @@ class _PointGates:
         self.m = np.zeros(0)
         if not (self.rows.size and scan.size):
             return
-        if self.rows.size * scan.size <= BRUTE_FORCE_PAIRS:  # every pair: cheaper than a tree
-            det, trk = (a.ravel() for a in np.indices((scan.size, self.rows.size)))
-        else:
-            spread = float(np.max(_largest_eigenvalue(self.Pp)))
-            r_max = float(np.max(_largest_eigenvalue(scan.R)))
-            radius = math.sqrt(POINT_GATE * (spread + r_max))
-            near = cKDTree(self.xy).query_ball_point(scan.z, radius)
-            counts = np.fromiter(map(len, near), dtype=np.intp, count=scan.size)
-            trk = np.fromiter(
-                itertools.chain.from_iterable(near), dtype=np.intp, count=counts.sum()
-            )
-            det = np.repeat(np.arange(scan.size, dtype=np.intp), counts)
+        # pre-gate: within each track's gate radius for the widest detection covariance
+        radius = np.sqrt(
+            POINT_GATE * (max_eigenvalue_2x2(self.Pp) + float(np.max(max_eigenvalue_2x2(scan.R))))
+        )
+        trk, det = pairs_within(self.xy, radius, scan.z)
         # np.take, not z[det]: several times faster for thousands of rows
         m = _mahalanobis(
             np.take(scan.z, det, axis=0) - np.take(self.xy, trk, axis=0),
@@ -261,11 +247,6 @@ class _PointGates:
         )
         inside = m <= POINT_GATE
         self.det, self.trk, self.m = det[inside], trk[inside], m[inside]
-
-    def pairs_in(self, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """The gated pairs whose detection is one of ``rows``: (detection rows, track indices)."""
-        sel = self._select(rows)
-        return self.det[sel], self.trk[sel]
 
     def best_of(self, rows: np.ndarray, tracks: np.ndarray) -> np.ndarray:
         """For each of the confirmed ``tracks`` (a boolean mask over them), the detection of
@@ -286,14 +267,6 @@ class _PointGates:
         mask = np.zeros(self.size, dtype=bool)
         mask[rows] = True
         return mask[self.det]
-
-    def without(self, rows: np.ndarray, det: np.ndarray, bad: np.ndarray) -> np.ndarray:
-        """``rows`` less the detections of the pairs ``det[bad]``."""
-        if not bad.any():
-            return rows
-        drop = np.zeros(self.size, dtype=bool)
-        drop[det[bad]] = True
-        return rows[~drop[rows]]
 
 
 def _moves_with(
@@ -485,7 +458,7 @@ class ExtendedTracker:
             if splitting:  # the parent keeps the rest, its extent fitted to it afresh
                 chosen = np.setdiff1d(chosen, split_rows, assume_unique=True)
                 if chosen.size:
-                    est = replace(est, X=_spread_extent(scan, chosen, cfg), alpha=2.0 + chosen.size)
+                    est = replace(est, X=_spread(scan, chosen, cfg)[2], alpha=2.0 + chosen.size)
             n = int(chosen.size)
             gamma = max(MIN_GAMMA, track.gamma + GAMMA_GAIN * (n - track.gamma))
             if n:
@@ -505,7 +478,7 @@ class ExtendedTracker:
                 detection_ids=_ids(scan, chosen),
                 split_evidence=0 if splitting else evidence,
                 split_centroid=split_c,
-                split_radius=split_d,
+                split_gap=split_d,
                 split_time=t,
                 origin=track.origin,
                 visitors=track.visitors,
@@ -791,7 +764,7 @@ def _split_evidence(
                 main = max(rest, key=lambda r: r.size)
                 cs = centroid[id(rows)]
                 gap = float(np.hypot(*(cs - centroid[id(main)])))
-                if gap > track.split_radius:
+                if gap > track.split_gap:
                     evidence = track.split_evidence + 1
                     return evidence, rows, (float(cs[0]), float(cs[1])), gap, (cs - prev) / dt
     main = max(parts, key=lambda r: r.size)
@@ -805,19 +778,22 @@ def _split_evidence(
     return 1, rows, (float(cs[0]), float(cs[1])), gap, velocity
 
 
-def _spread_extent(scan: Scan, rows: np.ndarray, cfg: ExtendedConfig) -> np.ndarray:
-    """The extent that the detections ``rows`` spread over: ``(Ȳ/(n − 1) − R̄) / z``, each
-    eigenvalue at least R̄'s largest (``n ≥ 2``; R̄'s largest times the identity for one)."""
+def _spread(
+    scan: Scan, rows: np.ndarray, cfg: ExtendedConfig
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
+    """What the detections ``rows`` (n ≥ 1) spread over: their centroid ``c``, their sample
+    covariance ``Ȳ/max(1, n − 1)``, the extent ``X = (Ȳ/(n − 1) − R̄) / z`` with each
+    eigenvalue at least R̄'s largest (that floor times the identity for one detection), and
+    the floor."""
     Z = scan.z[rows]
     n = Z.shape[0]
     Rm = np.mean(scan.R[rows], axis=0)
-    floor = float(np.max(np.linalg.eigvalsh(Rm)))
-    if n < 2:
-        return np.eye(2) * floor
     c = Z.mean(axis=0)
-    X = ((Z - c).T @ (Z - c) / (n - 1) - Rm) / cfg.z_scale
+    spread = (Z - c).T @ (Z - c) / max(1, n - 1)
+    X = (spread - Rm) / cfg.z_scale
     w, V = np.linalg.eigh(0.5 * (X + X.T))
-    return (V * np.maximum(w, floor)) @ V.T
+    floor = float(np.max(np.linalg.eigvalsh(Rm)))
+    return c, spread, (V * np.maximum(w, floor)) @ V.T, floor
 
 
 def _merge(
@@ -885,15 +861,8 @@ def _born(
 ) -> ExtendedTrack:
     """A new track from the detections ``rows`` of ``scan`` moving at ``velocity``;
     ``origin`` the time its cluster was first seen (default: now)."""
-    Z = scan.z[rows]
-    n = Z.shape[0]
-    Rm = np.mean(scan.R[rows], axis=0)
-    c = Z.mean(axis=0)
-    spread = (Z - c).T @ (Z - c) / max(1, n - 1)
-    X = (spread - Rm) / cfg.z_scale
-    w, V = np.linalg.eigh(0.5 * (X + X.T))
-    floor = float(np.max(np.linalg.eigvalsh(Rm)))
-    X = (V * np.maximum(w, floor)) @ V.T
+    n = rows.size
+    c, spread, X, floor = _spread(scan, rows, cfg)
     # the centroid of what was seen, not yet of the whole: the object may reach a resolution
     # distance beyond its detections on any side, so the centroid is uncertain by half of it
     pos_var = max(float(np.trace(spread)) / (2.0 * n) + floor, (0.5 * cfg.resolution_distance) ** 2)
