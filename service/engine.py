@@ -53,6 +53,7 @@ from service.stats import Stats
 from service.viewers import ViewerHub
 from trackers.config import TrackerConfig
 from trackers.extended.tracker import ExtendedTracker, snapshot_of
+from trackers.formation.tracker import FormationTracker
 from trackers.pipeline import MAX_ABS_POSITION, TrackingPipeline
 from trackers.state import StateError
 from trackers.types import ScanRejected, StepResult, TrackSnapshot
@@ -487,6 +488,36 @@ class Engine:
                 raise CommandRefused(str(exc)) from None
             self._refresh_state(t)
             return track_to_dict(snapshot_of(track))
+
+        return self.call_in_worker(command, timeout)
+
+    def form_formation(self, members: list[str], *, timeout: float = 5.0) -> dict[str, Any]:
+        """Ask for a formation of the live individual tracks ``members`` on the worker
+        (:meth:`FormationTracker.request`): it is formed at the next batch from those still
+        live then. Returns the formation's Track as of now. Raises :class:`CommandRefused`
+        (nothing changed) for an unknown id, one already in a formation, a repeated id, or
+        when formation tracking is switched off, and :class:`EngineUnavailable` as
+        :meth:`call_in_worker`."""
+
+        def command(pipeline: TrackingPipeline) -> dict[str, Any]:
+            tracker = next((p for p in pipeline.peers if p.kind == "formation"), None)
+            if not isinstance(tracker, FormationTracker):
+                raise CommandRefused(
+                    "formation tracking is not part of this tracker", conflict=True
+                )
+            if not pipeline.config.formation.enabled:
+                raise CommandRefused(
+                    "formation tracking is switched off (configuration formation.enabled)",
+                    conflict=True,
+                )
+            last = pipeline.last_time
+            if last is None:
+                raise CommandRefused("members: no track exists before the first batch")
+            try:
+                snap = tracker.request(members, pipeline.point.predicted(last))
+            except ValueError as exc:
+                raise CommandRefused(str(exc)) from None
+            return track_to_dict(snap)
 
         return self.call_in_worker(command, timeout)
 

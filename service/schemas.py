@@ -51,6 +51,7 @@ __all__ = [
     "ExtentAxesIn",
     "ExtentMatrixIn",
     "ExtentOut",
+    "FormationIn",
     "IngestAcceptedOut",
     "IngestConfig",
     "ProcessingTimesOut",
@@ -59,6 +60,7 @@ __all__ = [
     "TrackReportOut",
     "decode_batch",
     "decode_extended_track",
+    "decode_formation",
     "format_validation_error",
     "valid_sensor_id",
 ]
@@ -472,6 +474,38 @@ def decode_extended_track(payload: bytes | str) -> ExtendedTrackIn:
             loc = tuple(err["loc"])
             if len(loc) > 2 and loc[0] == "extent" and loc[1] in ("matrix", "axes"):
                 err["loc"] = (loc[0], *loc[2:])
+        raise ValueError(format_validation_error(exc, errors)) from None
+
+
+# -- forming a formation by hand (POST /api/v1/tracks/formation) ---------------------------
+
+#: The most members a formation asked for by hand may have.
+MAX_FORMATION_MEMBERS = 100
+
+
+class FormationIn(BaseModel):
+    """A formation to form by hand from live individual tracks."""
+
+    model_config = ConfigDict(
+        extra="forbid", frozen=True, json_schema_extra={"examples": [{"members": ["T3", "T4"]}]}
+    )
+
+    members: list[Annotated[str, Field(min_length=1, max_length=64)]] = Field(
+        min_length=2,
+        max_length=MAX_FORMATION_MEMBERS,
+        description="ids of live individual tracks, each in no formation yet",
+    )
+
+
+def decode_formation(payload: bytes | str) -> FormationIn:
+    """Parse and validate a request to form a formation; raise ``ValueError`` whose message
+    names the field."""
+    try:
+        return FormationIn.model_validate_json(payload)
+    except ValidationError as exc:
+        errors = exc.errors(include_url=False, include_input=False)
+        if errors and errors[0]["type"] == "model_type" and not errors[0]["loc"]:
+            raise ValueError("the body must be a JSON object") from None
         raise ValueError(format_validation_error(exc, errors)) from None
 
 

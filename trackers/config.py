@@ -17,6 +17,7 @@ __all__ = [
     "INITIATION_METHODS",
     "AssociationConfig",
     "ExtendedConfig",
+    "FormationConfig",
     "GatingConfig",
     "InitiationConfig",
     "MeasurementConfig",
@@ -351,6 +352,69 @@ class ExtendedConfig:
 
 
 @dataclass(frozen=True)
+class FormationConfig:
+    """Formations: tight groups of resolvable targets tracked by template matching (paper 003,
+    :mod:`trackers.formation`).
+
+    Confirmed individual tracks at least ``min_speed`` fast, at least ``min_members`` of them,
+    each within ``max_spacing`` of another and moving within ``max_velocity_difference`` of
+    it, no two closer than ``extended.resolution_distance`` (closer ones are one unresolved
+    object, the extended tracker's), seen so for ``confirm_scans`` scans spanning at least
+    ``confirm_time``, become a formation. Its members are then updated with the detections
+    that the template of the formation (the members' predicted positions on a grid, eq. 7)
+    matches; their motion is the IMM of ``motion`` with the constant-velocity noise ``q_cv``
+    (formations fly steadily; the coordinated-turn mode follows their turns).
+
+    Off by default: on the paper's environments it holds the targets as well as the
+    individual tracker alone, not better yet (``python -m benchmarks.formation``). A member that
+    falls ``leave_distance`` behind or away from every other member, or whose velocity parts
+    from the formation's by more than ``max_velocity_difference`` beyond what its turn and its
+    own velocity uncertainty (3σ) explain, for ``leave_time``, or that is not detected for
+    ``max_coast_time``, is handed back to the individual tracker; a formation left with fewer
+    than 2 members ends.
+    """
+
+    enabled: bool = _field(
+        False, "track formations of resolvable targets by template matching (opt-in)"
+    )
+    min_members: int = _field(3, "fewest confirmed tracks that start a formation", ge=2, le=100)
+    min_speed: float = _field(
+        30.0, "slowest members of a formation started automatically, m/s", ge=0, le=1e4
+    )
+    max_spacing: float = _field(
+        1000.0, "each member is within this distance of another member, m", gt=0, le=1e6
+    )
+    max_velocity_difference: float = _field(
+        20.0, "members move within this speed of each other, m/s", gt=0, le=1e4
+    )
+    confirm_scans: int = _field(
+        5, "scans a group of tracks must move together to become a formation", ge=1, le=1000
+    )
+    confirm_time: float = _field(3.0, "and the time those scans must span, s", ge=0, le=1e6)
+    q_cv: float = _field(
+        0.05, "acceleration noise PSD of the members' constant-velocity mode, m²/s³", gt=0, le=1e4
+    )
+    gate_probability: float = _field(
+        0.9999, "probability that a member's detection falls in its gate", gt=0, lt=1
+    )
+    leave_distance: float = _field(
+        2000.0, "a member this far from every other member is leaving, m", gt=0, le=1e6
+    )
+    leave_time: float = _field(5.0, "a member leaving this long is handed back, s", ge=0, le=1e6)
+    max_coast_time: float = _field(
+        10.0, "a member undetected this long is handed back, s", gt=0, le=1e6
+    )
+
+    def __post_init__(self) -> None:
+        _check_bounds(self, "formation")
+
+    @property
+    def gate_threshold(self) -> float:
+        """γ with P(χ²₂ ≤ γ) = P_G: γ = −2 ln(1 − P_G)."""
+        return -2.0 * math.log1p(-self.gate_probability)
+
+
+@dataclass(frozen=True)
 class TrackerConfig:
     """Everything the trackers can be told."""
 
@@ -361,6 +425,7 @@ class TrackerConfig:
     gating: GatingConfig = field(default_factory=GatingConfig)
     track_management: TrackManagementConfig = field(default_factory=TrackManagementConfig)
     extended: ExtendedConfig = field(default_factory=ExtendedConfig)
+    formation: FormationConfig = field(default_factory=FormationConfig)
 
     def to_dict(self) -> dict[str, Any]:
         """Nested plain dicts and lists, JSON-ready."""

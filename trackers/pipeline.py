@@ -21,6 +21,7 @@ import numpy as np
 
 from trackers.config import TrackerConfig
 from trackers.extended.tracker import ExtendedTracker
+from trackers.formation.tracker import FormationTracker
 from trackers.individual import IndividualTracker
 from trackers.peers import (
     PeerError,
@@ -29,6 +30,7 @@ from trackers.peers import (
     PersistentTracker,
     PointDirectives,
     PointTracker,
+    PointTrackView,
     StateCheckpoint,
     check_proposal,
     combine_directives,
@@ -68,8 +70,28 @@ def make_point_tracker(config: TrackerConfig) -> PointTracker:
 
 
 def standard_peers(config: TrackerConfig) -> tuple[PeerTracker, ...]:
-    """One of each peer kind: extended objects and groups (:mod:`trackers.extended`)."""
-    return (ExtendedTracker(config),)
+    """One of each peer kind, in the order they see a scan: extended objects and groups
+    (:mod:`trackers.extended`), then formations (:mod:`trackers.formation`), which see
+    neither the detections nor the tracks the extended tracker took: a convoy of unresolved
+    returns is never a formation."""
+    return (ExtendedTracker(config), FormationTracker(config))
+
+
+def _view_without(view: PointTrackView, taken: set[str]) -> PointTrackView:
+    """``view`` less the tracks ``taken``."""
+    keep = np.array([tid not in taken for tid in view.ids], dtype=bool)
+    idx = np.flatnonzero(keep)
+    return PointTrackView(
+        time=view.time,
+        ids=tuple(view.ids[i] for i in idx.tolist()),
+        x=np.take(view.x, idx, axis=0),
+        P=np.take(view.P, idx, axis=0),
+        score=view.score[idx],
+        hits=view.hits[idx],
+        confirmed=view.confirmed[idx],
+        created=view.created[idx],
+        updated=view.updated[idx],
+    )
 
 
 def check_scan(scan: Scan, last_time: float | None) -> None:
@@ -203,21 +225,29 @@ class TrackingPipeline:
             self._last_time = scan.time
             return proposal.result
         view = self.point.predicted(scan.time)
+        # The peers see the scan one after another, each without the detections claimed
+        # and the tracks taken by those before it.
         proposals: list[PeerProposal] = []
+        claimed = np.zeros(scan.size, dtype=bool)
+        peer_scan, peer_view = scan, view
+        free = np.arange(scan.size)
         for peer in self.peers:
             try:
-                prop = peer.propose(scan, view)
+                prop = peer.propose(peer_scan, peer_view)
             except ScanRejected:
                 raise
             except Exception as exc:
                 raise PeerError(peer.kind, f"{type(exc).__name__}: {exc}") from exc
-            check_proposal(peer.kind, prop, scan, view)
+            check_proposal(peer.kind, prop, peer_scan, peer_view)
             proposals.append(prop)
+            if prop.claimed.any():
+                claimed[free[prop.claimed]] = True
+                free = np.flatnonzero(~claimed)
+                peer_scan = scan.subset(~claimed)
+            if prop.take:
+                peer_view = _view_without(peer_view, set(prop.take))
         kinds = tuple(p.kind for p in self.peers)
         directives = combine_directives(kinds, tuple(proposals), view)
-        claimed = np.zeros(scan.size, dtype=bool)
-        for prop in proposals:
-            claimed |= prop.claimed
         point = self.point.propose(scan.subset(~claimed), directives)
         # Commit: every tracker has proposed without error.
         for peer, prop in zip(self.peers, proposals, strict=True):

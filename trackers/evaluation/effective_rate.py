@@ -52,7 +52,12 @@ class EffectiveRateCounter:
         truth_positions: np.ndarray,
         track_ids: Sequence[str],
         track_positions: np.ndarray,
-    ) -> None:
+        gate: float | None = None,
+    ) -> dict[int, str]:
+        """Count one scan; ``gate`` (m) replaces the counter's for this scan. Returns the
+        target → track pairs of the scan."""
+        if gate is not None:
+            self.gate = float(gate)
         truth_ids = [int(i) for i in truth_ids]
         X = np.asarray(truth_positions, dtype=float).reshape(-1, 2)
         Y = np.asarray(track_positions, dtype=float).reshape(-1, 2)
@@ -82,6 +87,7 @@ class EffectiveRateCounter:
             self._false += len(track_ids) - len(used_tracks)
         self._previous = current
         self._scan += 1
+        return current
 
     def result(self, classes: Mapping[int, str] | None = None) -> EffectiveRate:
         classes = classes or {}

@@ -1,0 +1,174 @@
+"""The formation peer (paper 003) in the pipeline: formation, member updates, hand-backs."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from clients.scenarios.airspace import (
+    Manoeuvre,
+    PolarRadar,
+    ScriptedScenario,
+    ScriptedTarget,
+    simulate_scripted,
+)
+from clients.scenarios.formation import environment_1, run_figures, simulate_formations
+from trackers.config import TrackerConfig
+from trackers.formation.tracker import FormationTracker, _moving_together
+from trackers.peers import PointTrackView
+from trackers.pipeline import TrackingPipeline
+
+ON = TrackerConfig().merged({"formation": {"enabled": True}})
+
+
+def _formation_peer(p: TrackingPipeline) -> FormationTracker:
+    peer = next(p for p in p.peers if p.kind == "formation")
+    assert isinstance(peer, FormationTracker)
+    return peer
+
+
+def _view(xy: list[tuple[float, float]], v: tuple[float, float], t: float = 0.0) -> PointTrackView:
+    n = len(xy)
+    x = np.array([[px, py, v[0], v[1], 0.0] for px, py in xy])
+    return PointTrackView(
+        time=t,
+        ids=tuple(f"T{i + 1}" for i in range(n)),
+        x=x,
+        P=np.tile(np.diag([100.0, 100.0, 4.0, 4.0, 1e-4]), (n, 1, 1)),
+        score=np.full(n, 20.0),
+        hits=np.full(n, 10),
+        confirmed=np.ones(n, dtype=bool),
+        created=np.zeros(n),
+        updated=np.full(n, t),
+    )
+
+
+def test_tracks_moving_together_become_a_formation_after_its_scans() -> None:
+    cfg = ON
+    groups: dict = {}
+    spread = [(0.0, 0.0), (300.0, 0.0), (600.0, 50.0)]
+    for k in range(cfg.formation.confirm_scans):
+        t = float(k)
+        groups, ripe = _moving_together(_view(spread, (250.0, 0.0), t), cfg, groups, t, set())
+        if k < cfg.formation.confirm_scans - 1:
+            assert ripe == [] and len(groups) == 1
+    assert ripe == [[0, 1, 2]] and groups == {}
+    # closer than the resolution distance: one unresolved object, never a formation
+    close = [(0.0, 0.0), (100.0, 0.0), (200.0, 0.0)]
+    assert _moving_together(_view(close, (250.0, 0.0)), cfg, {}, 0.0, set()) == ({}, [])
+    # too slow, too few, or too far apart
+    assert _moving_together(_view(spread, (10.0, 0.0)), cfg, {}, 0.0, set()) == ({}, [])
+    assert _moving_together(_view(spread[:2], (250.0, 0.0)), cfg, {}, 0.0, set()) == ({}, [])
+    apart = [(0.0, 0.0), (1500.0, 0.0), (3000.0, 0.0)]
+    assert _moving_together(_view(apart, (250.0, 0.0)), cfg, {}, 0.0, set()) == ({}, [])
+
+
+def test_paper_003_environment_1_forms_both_formations_and_holds_every_target() -> None:
+    p = TrackingPipeline.all_kinds(ON)
+    figures = run_figures(environment_1(seed=0, scans=40), p)
+    assert figures.formations_at_end == 2
+    assert figures.rate >= 0.99 and figures.rms_position < 40.0
+    tracks = p.snapshot()
+    formations = [t for t in tracks if t.kind == "formation"]
+    for f in formations:
+        assert f.members is not None and len(f.members) >= 3
+        members = [t for t in tracks if t.id in f.members]
+        assert all(m.kind == "individual" and m.formation_id == f.id for m in members)
+        centre = np.mean([m.position for m in members], axis=0)
+        assert np.allclose(f.position, centre)
+    # the point tracker no longer holds the members
+    held = set(p.point.predicted(p.last_time).ids)
+    assert not held & {m for f in formations for m in (f.members or ())}
+
+
+def test_formations_are_off_by_default() -> None:
+    p = TrackingPipeline.all_kinds()
+    for sim in simulate_formations(environment_1(seed=0, scans=20)):
+        assert not [t for t in p.process(sim.to_scan()).tracks if t.kind == "formation"]
+
+
+def test_a_member_that_turns_away_is_handed_back_under_its_id() -> None:
+    speed = 250.0
+    targets = tuple(
+        ScriptedTarget(
+            "member",
+            (-8000.0 + 300.0 * i, 10000.0 + 40.0 * i, speed, 0.0),
+            (Manoeuvre(25.0, 20.0, math.radians(3.0)),) if i == 3 else (),
+        )
+        for i in range(4)
+    )
+    radars = tuple(
+        PolarRadar(
+            f"radar-{i + 1}",
+            position=pos,
+            range_std=40.0,
+            bearing_std=2e-3,
+            period=1.0,
+            time_offset=i / 3.0,
+            clutter_mean=0.0,
+        )
+        for i, pos in enumerate(((-20e3, 0.0), (0.0, -20e3), (20e3, 0.0)))
+    )
+    scenario = ScriptedScenario(targets, radars, duration=80.0, seed=3)
+    p = TrackingPipeline.all_kinds(ON)
+    peer = _formation_peer(p)
+    member_of_leaver: str | None = None
+    for sim in simulate_scripted(scenario):
+        result = p.process(sim.to_scan())
+        if sim.time < 24.0 and peer.formations:
+            f = peer.formations[0]
+            x, _ = f.combined()
+            d = np.hypot(*(x[:, :2] - sim.truth_states[3, :2]).T)
+            member_of_leaver = f.members[int(np.argmin(d))]
+    assert member_of_leaver is not None, "no formation formed before the turn"
+    f = peer.formations[0]
+    assert member_of_leaver not in f.members and len(f.members) >= 2
+    mine = [t for t in result.confirmed() if t.id == member_of_leaver]
+    assert mine and mine[0].formation_id is None and mine[0].kind == "individual"
+    assert np.hypot(*(np.array(mine[0].position) - sim.truth_states[3, :2])) < 300.0
+
+
+def test_a_formation_asked_for_by_ids_is_formed_at_the_next_scan() -> None:
+    cfg = ON.merged({"formation": {"min_speed": 1e4}})  # none forms by itself
+    p = TrackingPipeline.all_kinds(cfg)
+    peer = _formation_peer(p)
+    sims = simulate_formations(environment_1(seed=1, scans=15))
+    for sim in sims[:30]:
+        p.process(sim.to_scan())
+    view = p.point.predicted(p.last_time)
+    confirmed = [tid for tid, c in zip(view.ids, view.confirmed, strict=True) if c]
+    assert len(confirmed) >= 3
+    with pytest.raises(ValueError, match="at least 2"):
+        peer.request(confirmed[:1], view)
+    with pytest.raises(ValueError, match="twice"):
+        peer.request([confirmed[0], confirmed[0]], view)
+    with pytest.raises(ValueError, match="no live individual track 'T999'"):
+        peer.request([confirmed[0], "T999"], view)
+    snap = peer.request(confirmed[:2], view)
+    assert snap.kind == "formation" and snap.members == tuple(confirmed[:2])
+    with pytest.raises(ValueError, match="already in formation"):
+        peer.request([confirmed[1], confirmed[2]], view)
+    assert peer.formations == ()
+    p.process(sims[30].to_scan())
+    assert [f.members for f in peer.formations] == [tuple(confirmed[:2])]
+    assert not set(confirmed[:2]) & set(p.point.predicted(p.last_time).ids)
+
+
+def test_switching_formations_off_hands_every_member_back() -> None:
+    p = TrackingPipeline.all_kinds(ON)
+    sims = simulate_formations(environment_1(seed=0, scans=30))
+    for sim in sims[:-3]:
+        p.process(sim.to_scan())
+    peer = _formation_peer(p)
+    members = {m for f in peer.formations for m in f.members}
+    assert members
+    p.reconfigure(TrackerConfig())
+    result = p.process(sims[-3].to_scan())
+    assert peer.formations == ()
+    assert set(result.deleted) >= {"F1", "F2"} or not [
+        t for t in result.tracks if t.kind == "formation"
+    ]
+    live = set(p.point.predicted(p.last_time).ids)
+    assert members <= live

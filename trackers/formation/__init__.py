@@ -1,0 +1,1 @@
+"""Formation tracks by template matching (paper 003)."""

@@ -1,0 +1,713 @@
+"""Formation tracks by template matching (paper 003, MSFT-TM); a peer of the point tracker.
+
+A formation is a few resolvable targets flying together. Its members are individual tracks
+that the formation tracker takes over from the point tracker and updates itself, each with
+the detection that the formation's template matches to it, so that members closer to each
+other than their gates never swap and clutter near them is not taken for them. Each scan (one
+sensor's batch; several sensors' batches come one after another, each with its own noise):
+
+1. **Prediction.** Every member's IMM (the modes of ``motion``, the constant-velocity mode
+   with the formation's own ``q_cv``) is predicted to the scan's time.
+2. **Pre-association** (section III.A). The detections near a formation are split into groups
+   by a distance threshold (the formation's largest member spacing); a group whose centre
+   ``z̄`` passes the centre gate ``(z̄ − c̄)ᵀ S̄⁻¹ (z̄ − c̄) ≤ γ`` (eq. 4; ``c̄`` the members' mean
+   predicted position, ``S̄ = P̄ + R̄/n + r² I`` its covariance, the noise of the group's mean
+   and the formation's radius ``r``, since the centre of a group of some of its members lies
+   anywhere within it) is the formation's; a group that fails sheds its detection farthest
+   from ``c̄`` and is tried again; a group that passes several formations' gates goes to the
+   nearest.
+3. **Template matching** (section III.B, :mod:`trackers.formation.template`), in the
+   formation's own frame (x along its heading): the template is the members' predicted
+   positions; the grid's cells follow eq. 7; the placement with the most matched members and
+   the least cost wins. When it leaves members unmatched, the template is also tried turned
+   and scaled about its centre (a formation that turns or opens up faster than its members'
+   predictions follow), and the better match kept.
+4. **Update** (section III.C). Each matched member's IMM is updated with its detection when it
+   lies inside the member's gate; its score gains ``ln(P_D Λ / λ)``, a missed member's
+   ``ln(1 − P_D)``. The formation claims its matched detections and every other detection in
+   a member's gate, so none of them starts an individual track.
+5. **Life cycle.** Groups of confirmed individual tracks that move together (the rules of
+   :class:`~trackers.config.FormationConfig`) for several scans become formations, their
+   tracks taken over under their ids; a formation can also be asked for by track ids
+   (:meth:`FormationTracker.request`), taken at the next scan. A member that leaves or goes
+   undetected too long is handed back to the point tracker; a formation of fewer than two
+   members ends, its last member handed back.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from trackers.association.spatial import pairs_within
+from trackers.config import FormationConfig, TrackerConfig
+from trackers.extended.partition import component_labels
+from trackers.filters.imm import imm_combine, imm_predict, imm_update, transition_matrix
+from trackers.formation.template import cell_sizes, match_template
+from trackers.models.motion import ConstantVelocity, CoordinatedTurn
+from trackers.peers import PeerProposal, PointTrackState, PointTrackView
+from trackers.types import Scan, TrackSnapshot
+
+__all__ = ["KIND", "Formation", "FormationTracker", "formation_snapshots"]
+
+KIND = "formation"
+
+#: Turns (rad) and scales tried about the template's centre when the template as predicted
+#: leaves members unmatched: a formation turning or opening up faster than predicted.
+_TURNS = (0.05, -0.05, 0.1, -0.1, 0.2, -0.2)
+_SCALES = (0.9, 1.1)
+
+#: How far beyond a formation's outermost member its detections are first looked for (m);
+#: the members' gates then decide.
+COARSE_REACH = 5000.0
+
+_H = np.zeros((2, 5))
+_H[0, 0] = _H[1, 1] = 1.0
+
+
+@dataclass(frozen=True, eq=False)
+class Formation:
+    """One formation: its members' ids and IMM states (``x (N, M, 5)``, ``P (N, M, 5, 5)``,
+    ``mu (N, M)``) at ``time``, their scores, hits, first and latest detection times,
+    ``leaving`` (since when each has looked like leaving, NaN if not) and latest detection ids;
+    ``started`` when the formation began, ``updated`` its latest detection and ``hits`` the
+    scans that updated it."""
+
+    id: str
+    members: tuple[str, ...]
+    time: float
+    x: np.ndarray
+    P: np.ndarray
+    mu: np.ndarray
+    score: np.ndarray
+    hits: np.ndarray
+    created: np.ndarray
+    updated: np.ndarray
+    leaving: np.ndarray
+    detection_ids: tuple[tuple[str, ...], ...]
+    started: float
+    last_update: float
+    scans: int = 0
+
+    def __len__(self) -> int:
+        return len(self.members)
+
+    def combined(self) -> tuple[np.ndarray, np.ndarray]:
+        """Each member's moment-matched estimate: ``x (N, 5)``, ``P (N, 5, 5)`` (computed once
+        per formation state)."""
+        cached = self.__dict__.get("_combined")
+        if cached is None:
+            cached = imm_combine(self.x, self.P, self.mu)
+            object.__setattr__(self, "_combined", cached)
+        return cached
+
+    def take(self, keep: np.ndarray) -> Formation:
+        """The formation with only the members where ``keep`` is true."""
+        idx = np.flatnonzero(keep)
+        return replace(
+            self,
+            members=tuple(self.members[i] for i in idx.tolist()),
+            x=np.take(self.x, idx, axis=0),
+            P=np.take(self.P, idx, axis=0),
+            mu=np.take(self.mu, idx, axis=0),
+            score=self.score[idx],
+            hits=self.hits[idx],
+            created=self.created[idx],
+            updated=self.updated[idx],
+            leaving=self.leaving[idx],
+            detection_ids=tuple(self.detection_ids[i] for i in idx.tolist()),
+        )
+
+
+@dataclass(frozen=True)
+class _Request:
+    """A formation asked for by track ids, formed at the next scan."""
+
+    id: str
+    members: tuple[str, ...]
+
+
+@dataclass(frozen=True)
+class _State:
+    config: TrackerConfig
+    formations: tuple[Formation, ...] = ()
+    #: Groups of tracks seen moving together: sorted member ids → (first time, scans).
+    groups: dict[tuple[str, ...], tuple[float, int]] = field(default_factory=dict)
+    requests: tuple[_Request, ...] = ()
+    next_id: int = 1
+    time: float | None = None
+
+
+def _models(config: TrackerConfig) -> tuple[ConstantVelocity | CoordinatedTurn, ...]:
+    """The members' modes: those of ``motion``, constant velocity with ``formation.q_cv``."""
+    m = config.motion
+    return tuple(
+        ConstantVelocity(config.formation.q_cv)
+        if name == "cv"
+        else CoordinatedTurn(m.q_ct, m.q_turn_rate)
+        for name in m.models
+    )
+
+
+def _new_formation(
+    fid: str, rows: Sequence[int], view: PointTrackView, config: TrackerConfig
+) -> Formation:
+    """A formation of the view's tracks ``rows``, every mode started from the track's state."""
+    idx = np.asarray(rows, dtype=np.intp)
+    M = len(config.motion.models)
+    x = np.take(view.x, idx, axis=0)
+    P = np.take(view.P, idx, axis=0)
+    n = idx.size
+    return Formation(
+        id=fid,
+        members=tuple(view.ids[i] for i in idx.tolist()),
+        time=view.time,
+        x=np.repeat(x[:, None], M, axis=1),
+        P=np.repeat(P[:, None], M, axis=1),
+        mu=np.tile(np.asarray(config.motion.initial_mode_probabilities, dtype=float), (n, 1)),
+        score=view.score[idx].copy(),
+        hits=view.hits[idx].copy(),
+        created=view.created[idx].copy(),
+        updated=view.updated[idx].copy(),
+        leaving=np.full(n, np.nan),
+        detection_ids=((),) * n,
+        started=view.time,
+        last_update=float(view.updated[idx].max()),
+    )
+
+
+class FormationTracker:
+    """Formation tracks (paper 003); a peer of the point tracker
+    (:class:`trackers.peers.PeerTracker`). See the module docstring for the step."""
+
+    kind = KIND
+
+    def __init__(self, config: TrackerConfig | None = None) -> None:
+        self._state = _State(config=config or TrackerConfig())
+
+    @property
+    def formations(self) -> tuple[Formation, ...]:
+        return self._state.formations
+
+    def reconfigure(self, config: TrackerConfig) -> None:
+        st = self._state
+        formations = st.formations
+        if len(config.motion.models) != len(st.config.motion.models):
+            formations = tuple(_remoded(f, config) for f in formations)
+        self._state = replace(st, config=config, formations=formations)
+
+    def commit(self, proposal: PeerProposal) -> None:
+        if isinstance(proposal.state, _State):
+            self._state = proposal.state
+
+    def snapshot(self) -> tuple[TrackSnapshot, ...]:
+        st = self._state
+        names = st.config.motion.models
+        return tuple(s for f in st.formations for s in formation_snapshots(f, names))
+
+    def members(self) -> dict[str, str]:
+        """Member track id → its formation's id, for every formation and request."""
+        out = {m: f.id for f in self._state.formations for m in f.members}
+        out.update({m: r.id for r in self._state.requests for m in r.members})
+        return out
+
+    def request(self, member_ids: Sequence[str], view: PointTrackView) -> TrackSnapshot:
+        """Ask for a formation of the point tracks ``member_ids`` (live in ``view``, the point
+        tracks as they are now): it is formed at the next scan from those still live then.
+        Returns the formation's track as of now; raises ``ValueError`` naming the problem (an
+        unknown id, one already in a formation, fewer than two, one twice) and changes
+        nothing then."""
+        st = self._state
+        if not st.config.formation.enabled:
+            raise ValueError("formation tracking is switched off (formation.enabled)")
+        ids = [str(i) for i in member_ids]
+        if len(ids) < 2:
+            raise ValueError(f"members: at least 2 track ids, got {len(ids)}")
+        if len(set(ids)) != len(ids):
+            raise ValueError("members: a track id is named twice")
+        taken = self.members()
+        index = view.index()
+        for tid in ids:
+            if tid in taken:
+                raise ValueError(f"members: track {tid!r} is already in formation {taken[tid]!r}")
+            if tid not in index:
+                raise ValueError(f"members: no live individual track {tid!r}")
+        fid = f"F{st.next_id}"
+        rows = [index[tid] for tid in ids]
+        snap = formation_snapshots(
+            _new_formation(fid, rows, view, st.config), st.config.motion.models
+        )[0]
+        self._state = replace(
+            st, requests=(*st.requests, _Request(fid, tuple(ids))), next_id=st.next_id + 1
+        )
+        return snap
+
+    # -- the step ----------------------------------------------------------------------------
+
+    def propose(self, scan: Scan, view: PointTrackView) -> PeerProposal:
+        st = self._state
+        config = st.config
+        cfg = config.formation
+        t = float(scan.time)
+        claimed = np.zeros(scan.size, dtype=bool)
+        if not cfg.enabled:
+            if not st.formations and not st.requests:
+                return PeerProposal(claimed=claimed, state=replace(st, time=t, groups={}))
+            handed = tuple(_handed(f, np.arange(len(f)), t) for f in st.formations)
+            return PeerProposal(
+                claimed=claimed,
+                hand_back=tuple(s for group in handed for s in group),
+                deleted=tuple(f.id for f in st.formations),
+                state=replace(st, formations=(), requests=(), groups={}, time=t),
+            )
+        models = _models(config)
+        formations = _predicted(st.formations, models, config, t)
+        # New formations: requested ones, then groups that have moved together long enough.
+        index = view.index()
+        taken: list[str] = []
+        next_id = st.next_id
+        for req in st.requests:
+            live = [m for m in req.members if m in index]
+            if len(live) >= 2:
+                formations.append(_new_formation(req.id, [index[m] for m in live], view, config))
+                taken.extend(live)
+        groups, ripe = _moving_together(view, config, st.groups, t, exclude=set(taken))
+        for rows in ripe:
+            formations.append(_new_formation(f"F{next_id}", rows, view, config))
+            taken.extend(view.ids[i] for i in rows)
+            next_id += 1
+        # Matching and update.
+        pd = config.track_management.pd if scan.pd is None else float(scan.pd)
+        lam = (
+            config.track_management.clutter_density
+            if scan.clutter_density is None
+            else float(scan.clutter_density)
+        )
+        formations, claimed = _update(formations, scan, config, pd, lam)
+        # Members leaving, lost, and formations ending.
+        kept: list[Formation] = []
+        hand_back: list[PointTrackState] = []
+        deleted: list[str] = []
+        for f in formations:
+            f, out = _leaving(f, cfg, t)
+            if len(f) - int(out.sum()) < 2:
+                out[:] = True
+            if out.any():
+                hand_back.extend(_handed(f, np.flatnonzero(out), t))
+            if out.all():
+                deleted.append(f.id)
+            else:
+                kept.append(f.take(~out) if out.any() else f)
+        # A member taken and handed back at once stays with the point tracker.
+        handed_ids = {s.id for s in hand_back}
+        take = tuple(m for m in taken if m not in handed_ids)
+        hand_back = [s for s in hand_back if s.id not in set(taken)]
+        new_state = replace(
+            st,
+            formations=tuple(kept),
+            groups=groups,
+            requests=(),
+            next_id=next_id,
+            time=t,
+        )
+        names = config.motion.models
+        return PeerProposal(
+            claimed=claimed,
+            take=take,
+            hand_back=tuple(hand_back),
+            tracks=tuple(s for f in kept for s in formation_snapshots(f, names)),
+            deleted=tuple(deleted),
+            state=new_state,
+        )
+
+
+# -- prediction and update ----------------------------------------------------------------------
+
+
+def _predicted(
+    formations: Sequence[Formation],
+    models: Sequence[ConstantVelocity | CoordinatedTurn],
+    config: TrackerConfig,
+    t: float,
+) -> list[Formation]:
+    """Every formation's members predicted to ``t``: one IMM call for all the formations of
+    one time (all of them, but for those started by hand since)."""
+    out = list(formations)
+    by_time: dict[float, list[int]] = {}
+    for i, f in enumerate(formations):
+        if f.time < t:
+            by_time.setdefault(f.time, []).append(i)
+    for t0, group in by_time.items():
+        dt = t - t0
+        x = np.concatenate([formations[i].x for i in group])
+        P = np.concatenate([formations[i].P for i in group])
+        mu = np.concatenate([formations[i].mu for i in group])
+        Pi = transition_matrix(config.motion.sojourn_times, dt)
+        xp, Pp, cbar = imm_predict(models, x, P, mu, Pi, dt)
+        start = 0
+        for i in group:
+            sl = slice(start, start + len(formations[i]))
+            out[i] = replace(formations[i], x=xp[sl], P=Pp[sl], mu=cbar[sl], time=t)
+            start = sl.stop
+    return out
+
+
+def _rotation(theta: float) -> np.ndarray:
+    c, s = math.cos(theta), math.sin(theta)
+    return np.array([[c, -s], [s, c]])
+
+
+def _match_one(
+    zhat: np.ndarray, S_pos: np.ndarray, vel: np.ndarray, Z: np.ndarray, R: np.ndarray, gamma: float
+) -> np.ndarray:
+    """Template matching of one formation's predicted member positions ``zhat (N, 2)`` to its
+    pre-associated detections ``Z (K, 2)`` (covariances ``R``), in the formation's frame.
+    Returns the detection index of each member (−1: none)."""
+    N = zhat.shape[0]
+    v = vel.mean(axis=0)
+    theta = math.atan2(v[1], v[0]) if math.hypot(v[0], v[1]) > 1.0 else 0.0
+    rot = _rotation(theta)  # body → world; world → body is rot.T
+    c = zhat.mean(axis=0)
+    A = (zhat - c) @ rot  # rows: R(−θ)(ẑ − c)
+    B = (Z - c) @ rot
+    Rb = np.einsum("ji,kjl,lm->kim", rot, R, rot)  # rotᵀ R rot
+    sigma = np.sqrt(np.maximum(Rb[:, [0, 1], [0, 1]].max(axis=0), 1e-6))
+    mu = cell_sizes(A, sigma)
+    Sc = rot.T @ S_pos.mean(axis=0) @ rot
+    max_shift = np.sqrt(gamma * (np.diag(Sc) + sigma**2))
+    miss = math.sqrt(gamma * float(np.linalg.eigvalsh(S_pos.mean(axis=0) + R.mean(axis=0))[-1]))
+    best = match_template(A, B, mu, max_shift=max_shift, miss_cost=miss)
+    if N >= 3 and Z.shape[0] >= 2 and (best is None or best.count < min(N, Z.shape[0])):
+        for s, turn in [(1.0, a) for a in _TURNS] + [(k, 0.0) for k in _SCALES]:
+            At = s * (A @ _rotation(turn).T)
+            m = match_template(At, B, mu, max_shift=max_shift, miss_cost=miss)
+            if m is not None and (best is None or (m.count > best.count and m.cost < best.cost)):
+                best = m
+    if best is None:
+        return np.full(N, -1, dtype=np.int64)
+    return best.assignment
+
+
+def _update(
+    formations: list[Formation], scan: Scan, config: TrackerConfig, pd: float, lam: float
+) -> tuple[list[Formation], np.ndarray]:
+    """Pre-association, template matching and the members' updates for one scan; the
+    detections claimed."""
+    claimed = np.zeros(scan.size, dtype=bool)
+    if not formations or scan.size == 0:
+        return [_missed(f, pd) for f in formations], claimed
+    cfg = config.formation
+    gamma = cfg.gate_threshold
+    Z, Rz = scan.z, scan.R
+    combined = [f.combined() for f in formations]
+    # Pre-association (III.A): for each formation, the detections within reach of its
+    # members, split into groups; a group goes to the formation whose centre gate it passes,
+    # the nearest when several do.
+    centres = np.array([x[:, :2].mean(axis=0) for x, _ in combined])
+    radius = np.array(
+        [
+            float(np.hypot(*(x[:, :2] - c).T).max())
+            for (x, _), c in zip(combined, centres, strict=True)
+        ]
+    )
+    fi, k = pairs_within(centres, radius + COARSE_REACH, Z)
+    owner = np.full(scan.size, -1, dtype=np.int64)
+    best_d2 = np.full(scan.size, np.inf)
+    for i in np.unique(fi).tolist():
+        rows = k[fi == i]
+        x, P = combined[i]
+        c = centres[i]
+        # Within reach: a member's gate, with the largest noise of the detections about.
+        R_near = float(np.linalg.eigvalsh(Rz[rows]).max())
+        lam_P = float(np.linalg.eigvalsh(P[:, :2, :2]).max())
+        margin = math.sqrt(gamma * (lam_P + R_near))
+        rows = rows[np.hypot(*(Z[rows] - c).T) <= radius[i] + margin]
+        if rows.size == 0:
+            continue
+        # The centre of a group of the formation's detections (some members, perhaps a false
+        # alarm) lies anywhere within the formation: its radius enters S̄ in every direction.
+        Sbar = P[:, :2, :2].mean(axis=0) + radius[i] ** 2 * np.eye(2)
+        sub = Z[rows]
+        gap = _largest_gap(x[:, :2]) + 3.0 * math.sqrt(R_near)
+        a, b = pairs_within(sub, np.full(rows.size, gap), sub)
+        labels = component_labels(rows.size, a, b)
+        for g in np.unique(labels).tolist():
+            group = rows[labels == g]
+            # eq. 4 on the group's centre; a group that fails it sheds its detection farthest
+            # from the formation's centre (clutter at its edge) and is tried again.
+            while group.size:
+                zbar = Z[group].mean(axis=0)
+                S = Sbar + Rz[group].mean(axis=0) / group.size
+                d = zbar - c
+                d2 = float(d @ np.linalg.solve(S, d))
+                if d2 <= gamma:
+                    closer = d2 < best_d2[group]
+                    owner[group[closer]] = i
+                    best_d2[group[closer]] = d2
+                    break
+                e = Z[group] - c
+                far = np.einsum("ni,ij,nj->n", e, np.linalg.inv(Sbar + Rz[group].mean(axis=0)), e)
+                group = np.delete(group, int(np.argmax(far)))
+    # Template matching (III.B) per formation; the matched pairs, gated per member.
+    rows_all: list[int] = []
+    dets_all: list[int] = []
+    starts = np.cumsum([0] + [len(f) for f in formations])
+    for i in range(len(formations)):
+        dets = np.flatnonzero(owner == i)
+        if dets.size == 0:
+            continue
+        x, P = combined[i]
+        zhat = x[:, :2]
+        S_pos = P[:, :2, :2]
+        assign = _match_one(zhat, S_pos, x[:, 2:4], Z[dets], Rz[dets], gamma)
+        S_all = S_pos[:, None] + Rz[dets][None]  # (N, K, 2, 2)
+        nu = Z[dets][None] - zhat[:, None]
+        d2 = np.einsum("nki,nkij,nkj->nk", nu, np.linalg.inv(S_all), nu)
+        claimed[dets[(d2 <= gamma).any(axis=0)]] = True
+        for n, a in enumerate(assign.tolist()):
+            if a >= 0 and d2[n, a] <= gamma:
+                rows_all.append(int(starts[i]) + n)
+                dets_all.append(int(dets[a]))
+                claimed[dets[a]] = True
+    # Update (III.C): every matched member at once.
+    x_all = np.concatenate([f.x for f in formations])
+    P_all = np.concatenate([f.P for f in formations])
+    mu_all = np.concatenate([f.mu for f in formations])
+    score = np.concatenate([f.score for f in formations]) + math.log1p(-min(pd, 1.0 - 1e-12))
+    hits = np.concatenate([f.hits for f in formations])
+    updated = np.concatenate([f.updated for f in formations])
+    det_ids: list[tuple[str, ...]] = [()] * len(x_all)
+    hit = np.zeros(len(x_all), dtype=bool)
+    if rows_all:
+        r = np.asarray(rows_all, dtype=np.intp)
+        d = np.asarray(dets_all, dtype=np.intp)
+        xu, Pu, muu, ll = imm_update(
+            np.take(x_all, r, axis=0),
+            np.take(P_all, r, axis=0),
+            np.take(mu_all, r, axis=0),
+            np.take(Z, d, axis=0),
+            np.take(Rz, d, axis=0),
+            _H,
+        )
+        x_all[r], P_all[r], mu_all[r] = xu, Pu, muu
+        score[r] += math.log(pd) - math.log1p(-min(pd, 1.0 - 1e-12)) + ll - math.log(lam)
+        hits[r] += 1
+        updated[r] = scan.time
+        hit[r] = True
+        for row, det in zip(r.tolist(), d.tolist(), strict=True):
+            det_ids[row] = (scan.detection_ids[det],) if scan.detection_ids else ()
+    out: list[Formation] = []
+    for i, f in enumerate(formations):
+        sl = slice(int(starts[i]), int(starts[i + 1]))
+        any_hit = bool(hit[sl].any())
+        out.append(
+            replace(
+                f,
+                x=x_all[sl],
+                P=P_all[sl],
+                mu=mu_all[sl],
+                score=score[sl],
+                hits=hits[sl],
+                updated=updated[sl],
+                detection_ids=tuple(det_ids[sl]),
+                last_update=scan.time if any_hit else f.last_update,
+                scans=f.scans + int(any_hit),
+            )
+        )
+    return out, claimed
+
+
+def _missed(f: Formation, pd: float) -> Formation:
+    return replace(
+        f,
+        score=f.score + math.log1p(-min(pd, 1.0 - 1e-12)),
+        detection_ids=((),) * len(f),
+    )
+
+
+def _largest_gap(p: np.ndarray) -> float:
+    """The longest edge of the members' minimum spanning tree: the distance threshold that
+    keeps all of the formation's detections in one group (pre-association)."""
+    n = p.shape[0]
+    if n < 2:
+        return 0.0
+    d = np.hypot(p[:, None, 0] - p[None, :, 0], p[:, None, 1] - p[None, :, 1])
+    # Prim's algorithm on a handful of points.
+    inside = np.zeros(n, dtype=bool)
+    inside[0] = True
+    best = d[0].copy()
+    longest = 0.0
+    for _ in range(n - 1):
+        cand = np.where(inside, np.inf, best)
+        j = int(np.argmin(cand))
+        longest = max(longest, float(cand[j]))
+        inside[j] = True
+        best = np.minimum(best, d[j])
+    return longest
+
+
+# -- life cycle ----------------------------------------------------------------------------------
+
+
+def _leaving(f: Formation, cfg: FormationConfig, t: float) -> tuple[Formation, np.ndarray]:
+    """The formation with its members' ``leaving`` times brought up to date, and the mask of
+    the members to hand back now: leaving for ``leave_time``, or undetected for
+    ``max_coast_time``. A member is leaving when it is farther than ``leave_distance`` from
+    every other member, or its velocity parts from the formation's rigid motion (the mean
+    velocity plus the mean turn rate times its offset from the centre) by more than
+    ``max_velocity_difference`` plus three standard deviations of its own velocity."""
+    x, P = f.combined()
+    n = len(f)
+    p, v = x[:, :2], x[:, 2:4]
+    c = p.mean(axis=0)
+    r = p - c
+    rigid = v.mean(axis=0) + float(x[:, 4].mean()) * np.column_stack([-r[:, 1], r[:, 0]])
+    sigma_v = np.sqrt(np.maximum(P[:, 2, 2] + P[:, 3, 3], 0.0))
+    apart = np.linalg.norm(v - rigid, axis=1) > cfg.max_velocity_difference + 3.0 * sigma_v
+    if n >= 2:
+        d = np.hypot(p[:, None, 0] - p[None, :, 0], p[:, None, 1] - p[None, :, 1])
+        np.fill_diagonal(d, np.inf)
+        apart |= d.min(axis=1) > cfg.leave_distance
+    since = np.where(apart, np.where(np.isnan(f.leaving), t, f.leaving), np.nan)
+    out = (apart & (t - since >= cfg.leave_time)) | (t - f.updated > cfg.max_coast_time)
+    return replace(f, leaving=since), out
+
+
+def _handed(f: Formation, rows: np.ndarray, t: float) -> tuple[PointTrackState, ...]:
+    """Members ``rows`` as point-track states at ``t`` (their combined estimates)."""
+    x, P = f.combined()
+    out = []
+    for n in np.asarray(rows, dtype=np.intp).tolist():
+        Pn = 0.5 * (P[n] + P[n].T)
+        out.append(
+            PointTrackState(
+                id=f.members[n],
+                time=t,
+                x=x[n],
+                P=Pn,
+                score=float(f.score[n]),
+                hits=int(f.hits[n]),
+                confirmed=True,
+                created=float(f.created[n]),
+                updated=float(f.updated[n]),
+            )
+        )
+    return tuple(out)
+
+
+def _moving_together(
+    view: PointTrackView,
+    config: TrackerConfig,
+    groups: dict[tuple[str, ...], tuple[float, int]],
+    t: float,
+    exclude: set[str],
+) -> tuple[dict[tuple[str, ...], tuple[float, int]], list[list[int]]]:
+    """Groups of confirmed tracks moving together now (each within ``max_spacing`` and
+    ``max_velocity_difference`` of another, at least ``min_speed`` fast, no two closer than
+    the resolution distance, at least ``min_members``), counted across scans; returns the
+    new counts and the rows of the groups ripe to become formations."""
+    cfg = config.formation
+    ok = view.confirmed.copy()
+    if len(view) == 0 or ok.sum() < cfg.min_members:
+        return {}, []
+    speed = np.hypot(view.x[:, 2], view.x[:, 3])
+    ok &= speed >= cfg.min_speed
+    if exclude:
+        ok &= np.array([tid not in exclude for tid in view.ids])
+    rows = np.flatnonzero(ok)
+    if rows.size < cfg.min_members:
+        return {}, []
+    p = np.take(view.x[:, :2], rows, axis=0)
+    v = np.take(view.x[:, 2:4], rows, axis=0)
+    a, b = pairs_within(p, np.full(rows.size, cfg.max_spacing), p)
+    keep = (a < b) & (np.hypot(*(v[a] - v[b]).T) <= cfg.max_velocity_difference)
+    a, b = a[keep], b[keep]
+    if a.size == 0:
+        return {}, []
+    labels = component_labels(rows.size, a, b)
+    d_res = config.extended.resolution_distance
+    out: dict[tuple[str, ...], tuple[float, int]] = {}
+    ripe: list[list[int]] = []
+    for g in np.unique(labels).tolist():
+        local = np.flatnonzero(labels == g)
+        if local.size < cfg.min_members:
+            continue
+        q = p[local]
+        d = np.hypot(q[:, None, 0] - q[None, :, 0], q[:, None, 1] - q[None, :, 1])
+        np.fill_diagonal(d, np.inf)
+        if d.min() < d_res:
+            continue  # closer than the resolution distance: one unresolved object
+        key = tuple(sorted(view.ids[i] for i in rows[local].tolist()))
+        first, n = groups.get(key, (t, 0))
+        n += 1
+        if n >= cfg.confirm_scans and t - first >= cfg.confirm_time:
+            ripe.append(rows[local].tolist())
+        else:
+            out[key] = (first, n)
+    return out, ripe
+
+
+def _remoded(f: Formation, config: TrackerConfig) -> Formation:
+    """A formation whose members restart their modes from their combined estimates (the set
+    of motion models changed)."""
+    x, P = f.combined()
+    M = len(config.motion.models)
+    n = len(f)
+    return replace(
+        f,
+        x=np.repeat(x[:, None], M, axis=1),
+        P=np.repeat(P[:, None], M, axis=1),
+        mu=np.tile(np.asarray(config.motion.initial_mode_probabilities, dtype=float), (n, 1)),
+    )
+
+
+# -- snapshots -----------------------------------------------------------------------------------
+
+
+def formation_snapshots(f: Formation, names: Sequence[str]) -> tuple[TrackSnapshot, ...]:
+    """The formation's track (``kind`` formation, ``members``) then its members' tracks
+    (``kind`` individual, ``formation_id``)."""
+    x, P = f.combined()
+    t = f.time
+    n = len(f)
+    cov = P[:, :4, :4].copy()
+    cov.flags.writeable = False
+    members = tuple(
+        TrackSnapshot(
+            id=f.members[i],
+            kind="individual",
+            status="confirmed",
+            time=t,
+            position=(float(x[i, 0]), float(x[i, 1])),
+            velocity=(float(x[i, 2]), float(x[i, 3])),
+            covariance=cov[i],
+            score=float(f.score[i]),
+            hits=int(f.hits[i]),
+            created=float(f.created[i]),
+            updated=float(f.updated[i]),
+            model_probabilities=dict(zip(names, f.mu[i].tolist(), strict=True)),
+            detection_ids=f.detection_ids[i],
+            formation_id=f.id,
+        )
+        for i in range(n)
+    )
+    C = cov.mean(axis=0) / n
+    C.flags.writeable = False
+    whole = TrackSnapshot(
+        id=f.id,
+        kind=KIND,
+        status="confirmed",
+        time=t,
+        position=(float(x[:, 0].mean()), float(x[:, 1].mean())),
+        velocity=(float(x[:, 2].mean()), float(x[:, 3].mean())),
+        covariance=C,
+        score=float(f.score.mean()),
+        hits=int(f.scans),
+        created=float(f.started),
+        updated=float(f.last_update),
+        members=f.members,
+    )
+    return (whole, *members)
