@@ -69,7 +69,8 @@ def _resolve_token(settings: Settings, source: str | None = None) -> str:
         return settings.api_token.get_secret_value()
     token = secrets.token_urlsafe(24)
     print(
-        "tracker-service: no TRACKER_API_TOKEN or --api-token set: generated for this run "
+        "tracker-service: no TRACKER_API_TOKEN, TRACKER_API_TOKEN_FILE or --api-token set: "
+        "generated for this run "
         f"(export TRACKER_API_TOKEN=... before starting to choose your own); "
         f"the API token for writes is: {token}",
         file=sys.stderr,
@@ -191,6 +192,49 @@ class ServiceRuntime:
             self.zenoh.close()
             self.zenoh = None
             log.info("tracker-service stopped")
+
+    def readiness(self) -> dict[str, Any]:
+        """Whether the service can take detections now (``GET /ready``): the Zenoh session
+        open and, when it is to reach others (connect endpoints, or a client), connected to
+        at least one router or peer; the tracker's worker running. ``detail`` names what is
+        not ready."""
+        s = self.settings
+        zio = self.zenoh
+        session = zio.session if zio is not None and not zio.closed else None
+        routers = peers = 0
+        if session is not None:
+            try:
+                routers = len(list(session.info.routers_zid()))
+                peers = len(list(session.info.peers_zid()))
+            except zenoh.ZError:  # closed under our feet
+                session = None
+        must_connect = bool(s.zenoh_connect) or s.zenoh_mode == "client"
+        connected = session is not None and (not must_connect or routers + peers > 0)
+        running = self.engine.running
+        problems = []
+        if session is None:
+            problems.append("the Zenoh session is not open")
+        elif not connected:
+            problems.append(
+                "the Zenoh session reaches no router or peer (connect "
+                f"{','.join(s.zenoh_connect) or 'none'})"
+            )
+        if not running:
+            problems.append("the tracker worker is not running")
+        out: dict[str, Any] = {
+            "status": "ready" if not problems else "not_ready",
+            "zenoh": {
+                "open": session is not None,
+                "connected": connected,
+                "mode": s.zenoh_mode,
+                "routers": routers,
+                "peers": peers,
+            },
+            "worker": {"running": running},
+        }
+        if problems:
+            out["detail"] = "; ".join(problems)
+        return out
 
     def _start_demo(self) -> None:
         command = demo_command(self.settings)
@@ -395,8 +439,12 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"tracker-service: {exc}", file=sys.stderr)
         return 2
     _configure_logging(settings.log_level)
+    if settings.api_token_file is not None:
+        source = f"the file {settings.api_token_file} (api_token_file)"
+    else:
+        source = api_token_source(argv)
     try:
-        app = create_app(settings, api_token_source(argv))
+        app = create_app(settings, source)
     except ConfigError as exc:
         print(f"tracker-service: {exc}", file=sys.stderr)
         return 2

@@ -39,6 +39,8 @@ from service.payload import DEFAULT_MAX_BATCH_BYTES, DEFAULT_QUEUE_BYTES
 from service.schemas import MAX_REORDER_WINDOW, IngestConfig
 
 __all__ = [
+    "CONTAINER_HTTP_HOST",
+    "CONTAINER_ZENOH_LISTEN",
     "DEFAULT_CONFIG_NAME",
     "DEMO_SCENARIOS",
     "Settings",
@@ -47,6 +49,7 @@ __all__ = [
     "build_parser",
     "default_state_dir",
     "load_settings",
+    "read_token_file",
     "split_endpoints",
 ]
 
@@ -56,6 +59,11 @@ DEFAULT_CONFIG_NAME = "config.json"
 #: The demo client's scenarios (``python -m clients.demo --scenario``): ``--demo`` alone runs
 #: the first, ``--demo convoy`` the one named.
 DEMO_SCENARIOS = ("continuous", "reference", "convoy", "harbour")
+
+#: Where the service listens in a container (``container``) unless told otherwise: every
+#: interface, so the ports the container publishes reach it.
+CONTAINER_HTTP_HOST = "0.0.0.0"
+CONTAINER_ZENOH_LISTEN = "tcp/0.0.0.0:7447"
 
 _INGEST = IngestConfig.model_fields
 _KEY_PREFIX_RE = re.compile(r"^[^/*$#?\s]+(/[^/*$#?\s]+)*$")
@@ -146,6 +154,22 @@ class Settings(BaseSettings):
     http_port: int = Field(default=8000, ge=0, le=65535, description="REST port (0: any free port)")
     api_token: SecretStr | None = Field(
         default=None, description="bearer token for writes; generated and printed once when unset"
+    )
+    api_token_file: Path | None = Field(
+        default=None,
+        description=(
+            "a file holding the bearer token for writes (a mounted Docker or Kubernetes "
+            "secret; surrounding white space ignored); instead of api_token"
+        ),
+    )
+    container: bool = Field(
+        default=False,
+        description=(
+            "run as in a container (the image sets TRACKER_CONTAINER=1): listen on all "
+            f"interfaces (REST {CONTAINER_HTTP_HOST}, Zenoh {CONTAINER_ZENOH_LISTEN}) unless "
+            "http_host or zenoh_listen is set, and refuse to start without api_token_file "
+            "or api_token"
+        ),
     )
     state_dir: Path = Field(
         default_factory=lambda: default_state_dir(),
@@ -320,6 +344,36 @@ class Settings(BaseSettings):
             return None
         return value
 
+    @field_validator("api_token_file", mode="before")
+    @classmethod
+    def _none_token_file(cls, value: Any) -> Any:
+        if isinstance(value, str) and value.strip().lower() in ("", "none"):
+            return None
+        return value
+
+    @model_validator(mode="after")
+    def _token_and_container(self) -> Settings:
+        """Read ``api_token_file``; in a container, listen on all interfaces unless told
+        otherwise and insist on a token given as a secret (never a generated one)."""
+        if self.api_token_file is not None:
+            if self.api_token is not None:
+                raise ValueError(
+                    _setting_error("api_token_file", "set api_token_file or api_token, not both")
+                )
+            self.api_token = SecretStr(read_token_file(self.api_token_file))
+        if self.container:
+            if "http_host" not in self.model_fields_set:
+                self.http_host = CONTAINER_HTTP_HOST
+            if "zenoh_listen" not in self.model_fields_set:
+                self.zenoh_listen = [CONTAINER_ZENOH_LISTEN]
+            if self.api_token is None:
+                raise ValueError(
+                    "in a container (TRACKER_CONTAINER) the API token must be given as a "
+                    "secret: set TRACKER_API_TOKEN_FILE to a file that holds it (a mounted "
+                    "Docker or Kubernetes secret) or TRACKER_API_TOKEN; not starting"
+                )
+        return self
+
     @field_validator("max_batch_bytes")
     @classmethod
     def _check_batch_bytes(cls, value: int, info: ValidationInfo) -> int:
@@ -339,6 +393,33 @@ class Settings(BaseSettings):
         file_secret_settings: PydanticBaseSettingsSource,
     ) -> tuple[PydanticBaseSettingsSource, ...]:
         return (init_settings, env_settings, SettingsFileSource(settings_cls))
+
+
+def _setting_error(name: str, message: str) -> str:
+    """An error about one setting, worded as :func:`_describe` words a field's."""
+    return f"invalid setting {name} / TRACKER_{name.upper()}: {message}"
+
+
+def read_token_file(path: Path) -> str:
+    """The token in ``path``, white space around it removed. Raises ``ValueError`` (naming
+    the setting) when the file cannot be read, is not text, is empty or holds more than one
+    line."""
+    try:
+        text = path.read_text(encoding="utf-8")
+    except OSError as exc:
+        raise ValueError(
+            _setting_error("api_token_file", f"cannot read {path}: {exc.strerror or exc}")
+        ) from None
+    except UnicodeDecodeError:
+        raise ValueError(_setting_error("api_token_file", f"{path} is not UTF-8 text")) from None
+    token = text.strip()
+    if not token:
+        raise ValueError(_setting_error("api_token_file", f"{path} is empty"))
+    if any(c.isspace() for c in token):
+        raise ValueError(
+            _setting_error("api_token_file", f"{path}: the token must be one word, one line")
+        )
+    return token
 
 
 class SettingsFileSource(PydanticBaseSettingsSource):
@@ -434,8 +515,11 @@ def build_parser(prog: str = "tracker-service") -> argparse.ArgumentParser:
 def _describe(exc: ValidationError) -> str:
     lines = []
     for err in exc.errors(include_url=False):
-        name = ".".join(str(p) for p in err["loc"]) or "settings"
+        name = ".".join(str(p) for p in err["loc"])
         msg = err["msg"].removeprefix("Value error, ")
+        if not name:  # a check of the settings together: its message says it all
+            lines.append(msg)
+            continue
         value = err.get("input")
         shown = f" (got {value!r})" if isinstance(value, str | int | float) and value != "" else ""
         if err["type"] == "extra_forbidden":
