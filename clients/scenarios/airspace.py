@@ -40,11 +40,14 @@ __all__ = [
     "FORMATION_GROUPS",
     "Manoeuvre",
     "PolarRadar",
+    "RadarHits",
     "ScriptedScenario",
     "ScriptedTarget",
     "formation_scenario",
     "manoeuvre_scenario",
     "mixed_speed_scenario",
+    "radar_hits",
+    "radar_scan",
     "simulate_scripted",
 ]
 
@@ -139,6 +142,67 @@ def _cartesian(rho: np.ndarray, theta: np.ndarray, radar: PolarRadar) -> np.ndar
     return np.asarray(radar.position) + np.column_stack([rho * np.cos(theta), rho * np.sin(theta)])
 
 
+@dataclass(frozen=True)
+class RadarHits:
+    """The targets a radar detected in one scan: the mask ``detected`` over the targets,
+    their noisy range ``rho`` and bearing ``theta``, and those as positions ``z``."""
+
+    detected: np.ndarray
+    rho: np.ndarray
+    theta: np.ndarray
+    z: np.ndarray
+
+
+def radar_hits(rng: np.random.Generator, radar: PolarRadar, states: np.ndarray) -> RadarHits:
+    """Each target of ``states (n, 4)`` detected with probability ``pd``, its range and
+    bearing with Gaussian noise (draws in this order: detections, ranges, bearings)."""
+    detected = rng.random(states.shape[0]) < radar.pd
+    rho, theta = _polar(states[detected, :2], radar)
+    rho = rho + radar.range_std * rng.standard_normal(rho.size)
+    theta = theta + radar.bearing_std * rng.standard_normal(theta.size)
+    return RadarHits(detected, rho, theta, _cartesian(rho, theta, radar))
+
+
+def radar_scan(
+    rng: np.random.Generator,
+    radar: PolarRadar,
+    t: float,
+    index: int,
+    states: np.ndarray,
+    hits: RadarHits,
+    clutter: np.ndarray,
+    density: float,
+) -> SimulatedScan:
+    """The scan number ``index`` at ``t``: the hits and the false alarms ``clutter (m, 2)``
+    in a random order, each with the polar covariance at its measured range and bearing;
+    truth ``states`` with ids ``0..n−1``; arrays read-only."""
+    ids = np.arange(states.shape[0], dtype=np.int64)
+    c_rho, c_theta = _polar(clutter, radar)
+    z = np.vstack([hits.z, clutter])
+    R = _polar_covariance(
+        np.concatenate([hits.rho, c_rho]), np.concatenate([hits.theta, c_theta]), radar
+    )
+    owner = np.concatenate([ids[hits.detected], np.full(clutter.shape[0], -1, dtype=np.int64)])
+    perm = rng.permutation(z.shape[0])
+    z, R, owner = z[perm], R[perm], owner[perm]
+    truth = states.copy()
+    for a in (z, R, owner, truth, ids):
+        a.setflags(write=False)
+    return SimulatedScan(
+        time=float(t),
+        sensor_id=radar.sensor_id,
+        truth_ids=ids,
+        truth_states=truth,
+        z=z,
+        R=R,
+        target_of_detection=owner,
+        detection_ids=tuple(f"s{index}-d{j}" for j in range(z.shape[0])),
+        pd=float(radar.pd),
+        clutter_density=float(density),
+        sensor_position=radar.position,
+    )
+
+
 def simulate_scripted(scenario: ScriptedScenario) -> list[SimulatedScan]:
     """Every radar's scans in time order (ties in radar order), reproducible by seed."""
     rng = np.random.default_rng(scenario.seed)
@@ -149,7 +213,6 @@ def simulate_scripted(scenario: ScriptedScenario) -> list[SimulatedScan]:
         if r.time_offset + k * r.period <= scenario.duration
     )
     states = np.array([t.state for t in scenario.targets], dtype=float).reshape(-1, 4)
-    ids = np.arange(states.shape[0], dtype=np.int64)
     now = 0.0
     scans: list[SimulatedScan] = []
     for index, (t, ri) in enumerate(slots):
@@ -162,11 +225,7 @@ def simulate_scripted(scenario: ScriptedScenario) -> list[SimulatedScan]:
             ).reshape(-1, 4)
             now = t
         radar = scenario.radars[ri]
-        detected = rng.random(ids.size) < radar.pd
-        rho, theta = _polar(states[detected, :2], radar)
-        rho = rho + radar.range_std * rng.standard_normal(rho.size)
-        theta = theta + radar.bearing_std * rng.standard_normal(theta.size)
-        z_hit = _cartesian(rho, theta, radar)
+        hits = radar_hits(rng, radar, states)
         (x0, x1), (y0, y1) = radar.clutter_area
         n_uniform = int(rng.poisson(radar.clutter_mean))
         clutter = [rng.uniform((x0, y0), (x1, y1), size=(n_uniform, 2))]
@@ -175,35 +234,10 @@ def simulate_scripted(scenario: ScriptedScenario) -> list[SimulatedScan]:
             centre = states[list(group), :2].mean(axis=0)
             n_local = int(rng.poisson(radar.local_clutter_mean))
             clutter.append(centre + rng.uniform(-h, h, size=(n_local, 2)))
-        z_clutter = np.vstack(clutter)
-        c_rho, c_theta = _polar(z_clutter, radar)
-        z = np.vstack([z_hit, z_clutter])
-        R = _polar_covariance(np.concatenate([rho, c_rho]), np.concatenate([theta, c_theta]), radar)
-        owner = np.concatenate([ids[detected], np.full(z_clutter.shape[0], -1, dtype=np.int64)])
-        perm = rng.permutation(z.shape[0])
-        z, R, owner = z[perm], R[perm], owner[perm]
         density = radar.clutter_mean / ((x1 - x0) * (y1 - y0))
         if scenario.groups and radar.local_clutter_mean > 0:
             density = max(density, radar.local_clutter_mean / (2.0 * h) ** 2)
-        for a in (z, R, owner):
-            a.setflags(write=False)
-        truth = states.copy()
-        truth.setflags(write=False)
-        scans.append(
-            SimulatedScan(
-                time=float(t),
-                sensor_id=radar.sensor_id,
-                truth_ids=ids,
-                truth_states=truth,
-                z=z,
-                R=R,
-                target_of_detection=owner,
-                detection_ids=tuple(f"s{index}-d{j}" for j in range(z.shape[0])),
-                pd=float(radar.pd),
-                clutter_density=float(density),
-                sensor_position=radar.position,
-            )
-        )
+        scans.append(radar_scan(rng, radar, t, index, states, hits, np.vstack(clutter), density))
     return scans
 
 

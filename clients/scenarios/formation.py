@@ -32,7 +32,7 @@ from typing import Any
 
 import numpy as np
 
-from clients.scenarios.airspace import PolarRadar, _cartesian, _polar, _polar_covariance
+from clients.scenarios.airspace import PolarRadar, radar_hits, radar_scan
 from clients.scenarios.multitarget import SimulatedScan
 from trackers.evaluation.effective_rate import EffectiveRateCounter
 
@@ -194,12 +194,7 @@ def simulate_formations(scenario: FormationScenario) -> list[SimulatedScan]:
     for index, (t, ri) in enumerate(slots):
         radar = scenario.radars[ri]
         states = scenario.truth(t)
-        ids = np.arange(states.shape[0], dtype=np.int64)
-        detected = rng.random(ids.size) < radar.pd
-        rho, theta = _polar(states[detected, :2], radar)
-        rho = rho + radar.range_std * rng.standard_normal(rho.size)
-        theta = theta + radar.bearing_std * rng.standard_normal(theta.size)
-        z_hit = _cartesian(rho, theta, radar)
+        hits = radar_hits(rng, radar, states)
         clutter = [np.zeros((0, 2))]
         density = 1e-12
         m = scenario.clutter_margin
@@ -211,32 +206,7 @@ def simulate_formations(scenario: FormationScenario) -> list[SimulatedScan]:
             n = int(rng.poisson(f.clutter_mean))
             clutter.append(rng.uniform(lo, hi, size=(n, 2)))
             density = max(density, f.clutter_mean / float(np.prod(hi - lo)))
-        z_clutter = np.vstack(clutter)
-        c_rho, c_theta = _polar(z_clutter, radar)
-        z = np.vstack([z_hit, z_clutter])
-        R = _polar_covariance(np.concatenate([rho, c_rho]), np.concatenate([theta, c_theta]), radar)
-        owner = np.concatenate([ids[detected], np.full(z_clutter.shape[0], -1, dtype=np.int64)])
-        perm = rng.permutation(z.shape[0])
-        z, R, owner = z[perm], R[perm], owner[perm]
-        for a in (z, R, owner):
-            a.setflags(write=False)
-        truth = states.copy()
-        truth.setflags(write=False)
-        scans.append(
-            SimulatedScan(
-                time=float(t),
-                sensor_id=radar.sensor_id,
-                truth_ids=ids,
-                truth_states=truth,
-                z=z,
-                R=R,
-                target_of_detection=owner,
-                detection_ids=tuple(f"s{index}-d{j}" for j in range(z.shape[0])),
-                pd=float(radar.pd),
-                clutter_density=float(density),
-                sensor_position=radar.position,
-            )
-        )
+        scans.append(radar_scan(rng, radar, t, index, states, hits, np.vstack(clutter), density))
     return scans
 
 

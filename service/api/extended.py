@@ -14,12 +14,10 @@ import functools
 from typing import Any
 
 from fastapi import APIRouter, HTTPException, Request
-from fastapi.concurrency import run_in_threadpool
 from fastapi.responses import Response
 
-from service.api.deps import EngineDep, FastJSONResponse, WriteAccess
-from service.api.detections import read_body
-from service.engine import CommandRefused, EngineUnavailable
+from service.api.deps import EngineDep, WriteAccess
+from service.api.track_commands import json_body, run_track_command
 from service.schemas import ExtendedTrackIn, TrackOut, decode_extended_track
 
 __all__ = ["MAX_BODY_BYTES", "router"]
@@ -31,34 +29,6 @@ MAX_BODY_BYTES = 64 * 1024
 #: How long the request waits for the tracker's worker to take the command (s).
 WORKER_TIMEOUT = 5.0
 
-
-def _inlined(schema: dict[str, Any]) -> dict[str, Any]:
-    """``schema`` with its ``$defs`` put in place of their ``$ref`` (none is recursive), so
-    it stands on its own inside the OpenAPI document."""
-    defs = schema.pop("$defs", {})
-
-    def walk(node: Any) -> Any:
-        if isinstance(node, dict):
-            ref = node.get("$ref")
-            if isinstance(ref, str) and ref.startswith("#/$defs/"):
-                rest = {k: v for k, v in node.items() if k != "$ref"}
-                return {**walk(defs[ref.removeprefix("#/$defs/")]), **walk(rest)}
-            return {k: walk(v) for k, v in node.items()}
-        if isinstance(node, list):
-            return [walk(v) for v in node]
-        return node
-
-    out: dict[str, Any] = walk(schema)
-    return out
-
-
-_BODY: dict[str, Any] = {
-    "requestBody": {
-        "required": True,
-        "description": "the track's centroid, velocity and extent prior",
-        "content": {"application/json": {"schema": _inlined(ExtendedTrackIn.model_json_schema())}},
-    }
-}
 
 _DESCRIPTION = (
     "Start a **confirmed** extended track from a centroid (`position`), a `velocity` and an "
@@ -83,7 +53,7 @@ _DESCRIPTION = (
     response_model=TrackOut,
     summary="Start an extended track by hand",
     description=_DESCRIPTION,
-    openapi_extra=_BODY,
+    openapi_extra=json_body(ExtendedTrackIn, "the track's centroid, velocity and extent prior"),
     responses={
         201: {"description": "the new Track"},
         401: {"description": "no or a wrong bearer token"},
@@ -93,33 +63,20 @@ _DESCRIPTION = (
     },
 )
 async def start_extended_track(request: Request, engine: EngineDep, _auth: WriteAccess) -> Response:
-    payload, size = await read_body(request, MAX_BODY_BYTES)
-    if payload is None:
-        raise HTTPException(
-            status_code=422, detail=f"the body is {size} bytes, over {MAX_BODY_BYTES}"
+    def command(body: ExtendedTrackIn) -> functools.partial[dict[str, Any]]:
+        return functools.partial(
+            engine.start_extended_track,
+            body.position,
+            body.velocity,
+            body.extent_matrix(),
+            position_std=body.position_std,
+            velocity_std=body.velocity_std,
+            expected_detections=body.expected_detections,
+            at=body.time,
+            timeout=WORKER_TIMEOUT,
         )
-    try:
-        body = decode_extended_track(payload)
-    except ValueError as exc:
-        raise HTTPException(status_code=422, detail=str(exc)) from None
-    start = functools.partial(
-        engine.start_extended_track,
-        body.position,
-        body.velocity,
-        body.extent_matrix(),
-        position_std=body.position_std,
-        velocity_std=body.velocity_std,
-        expected_detections=body.expected_detections,
-        at=body.time,
-        timeout=WORKER_TIMEOUT,
-    )
-    try:
-        track = await run_in_threadpool(start)
-    except CommandRefused as exc:
-        raise HTTPException(status_code=409 if exc.conflict else 422, detail=exc.detail) from None
-    except EngineUnavailable as exc:
-        raise HTTPException(status_code=503, detail=str(exc)) from None
-    return FastJSONResponse(track, status_code=201)
+
+    return await run_track_command(request, MAX_BODY_BYTES, decode_extended_track, command)
 
 
 @router.api_route("/extended", methods=["GET", "PUT", "PATCH", "DELETE"], include_in_schema=False)

@@ -11,15 +11,13 @@ when the answer is not 201.
 from __future__ import annotations
 
 import functools
+from typing import Any
 
 from fastapi import APIRouter, HTTPException, Request
-from fastapi.concurrency import run_in_threadpool
 from fastapi.responses import Response
 
-from service.api.deps import EngineDep, FastJSONResponse, WriteAccess
-from service.api.detections import read_body
-from service.api.extended import _inlined
-from service.engine import CommandRefused, EngineUnavailable
+from service.api.deps import EngineDep, WriteAccess
+from service.api.track_commands import json_body, run_track_command
 from service.schemas import FormationIn, TrackOut, decode_formation
 
 __all__ = ["router"]
@@ -51,13 +49,7 @@ _DESCRIPTION = (
     response_model=TrackOut,
     summary="Form a formation from individual tracks",
     description=_DESCRIPTION,
-    openapi_extra={
-        "requestBody": {
-            "required": True,
-            "description": "the member track ids",
-            "content": {"application/json": {"schema": _inlined(FormationIn.model_json_schema())}},
-        }
-    },
+    openapi_extra=json_body(FormationIn, "the member track ids"),
     responses={
         201: {"description": "the formation's Track"},
         401: {"description": "no or a wrong bearer token"},
@@ -67,23 +59,10 @@ _DESCRIPTION = (
     },
 )
 async def form_formation(request: Request, engine: EngineDep, _auth: WriteAccess) -> Response:
-    payload, size = await read_body(request, MAX_BODY_BYTES)
-    if payload is None:
-        raise HTTPException(
-            status_code=422, detail=f"the body is {size} bytes, over {MAX_BODY_BYTES}"
-        )
-    try:
-        body = decode_formation(payload)
-    except ValueError as exc:
-        raise HTTPException(status_code=422, detail=str(exc)) from None
-    form = functools.partial(engine.form_formation, list(body.members), timeout=WORKER_TIMEOUT)
-    try:
-        track = await run_in_threadpool(form)
-    except CommandRefused as exc:
-        raise HTTPException(status_code=409 if exc.conflict else 422, detail=exc.detail) from None
-    except EngineUnavailable as exc:
-        raise HTTPException(status_code=503, detail=str(exc)) from None
-    return FastJSONResponse(track, status_code=201)
+    def command(body: FormationIn) -> functools.partial[dict[str, Any]]:
+        return functools.partial(engine.form_formation, list(body.members), timeout=WORKER_TIMEOUT)
+
+    return await run_track_command(request, MAX_BODY_BYTES, decode_formation, command)
 
 
 @router.api_route("/formation", methods=["GET", "PUT", "PATCH", "DELETE"], include_in_schema=False)

@@ -42,6 +42,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from trackers.association.gating import inverse_2x2, max_eigenvalue_2x2
 from trackers.association.spatial import pairs_within
 from trackers.config import FormationConfig, TrackerConfig
 from trackers.extended.partition import component_labels
@@ -304,7 +305,8 @@ class FormationTracker:
         # A member taken and handed back at once stays with the point tracker.
         handed_ids = {s.id for s in hand_back}
         take = tuple(m for m in taken if m not in handed_ids)
-        hand_back = [s for s in hand_back if s.id not in set(taken)]
+        taken_ids = set(taken)
+        hand_back = [s for s in hand_back if s.id not in taken_ids]
         new_state = replace(
             st,
             formations=tuple(kept),
@@ -421,8 +423,8 @@ def _update(
         x, P = combined[i]
         c = centres[i]
         # Within reach: a member's gate, with the largest noise of the detections about.
-        R_near = float(np.linalg.eigvalsh(Rz[rows]).max())
-        lam_P = float(np.linalg.eigvalsh(P[:, :2, :2]).max())
+        R_near = float(max_eigenvalue_2x2(Rz[rows]).max())
+        lam_P = float(max_eigenvalue_2x2(P[:, :2, :2]).max())
         margin = math.sqrt(gamma * (lam_P + R_near))
         rows = rows[np.hypot(*(Z[rows] - c).T) <= radius[i] + margin]
         if rows.size == 0:
@@ -465,7 +467,7 @@ def _update(
         assign = _match_one(zhat, S_pos, x[:, 2:4], Z[dets], Rz[dets], gamma)
         S_all = S_pos[:, None] + Rz[dets][None]  # (N, K, 2, 2)
         nu = Z[dets][None] - zhat[:, None]
-        d2 = np.einsum("nki,nkij,nkj->nk", nu, np.linalg.inv(S_all), nu)
+        d2 = np.einsum("nki,nkij,nkj->nk", nu, inverse_2x2(S_all)[0], nu)
         claimed[dets[(d2 <= gamma).any(axis=0)]] = True
         for n, a in enumerate(assign.tolist()):
             if a >= 0 and d2[n, a] <= gamma:
@@ -528,13 +530,18 @@ def _missed(f: Formation, pd: float) -> Formation:
     )
 
 
+def _distances(p: np.ndarray) -> np.ndarray:
+    """``d_ij = ‖p_i − p_j‖`` of the points ``p (n, 2)``, ``(n, n)``."""
+    return np.hypot(p[:, None, 0] - p[None, :, 0], p[:, None, 1] - p[None, :, 1])
+
+
 def _largest_gap(p: np.ndarray) -> float:
     """The longest edge of the members' minimum spanning tree: the distance threshold that
     keeps all of the formation's detections in one group (pre-association)."""
     n = p.shape[0]
     if n < 2:
         return 0.0
-    d = np.hypot(p[:, None, 0] - p[None, :, 0], p[:, None, 1] - p[None, :, 1])
+    d = _distances(p)
     # Prim's algorithm on a handful of points.
     inside = np.zeros(n, dtype=bool)
     inside[0] = True
@@ -568,7 +575,7 @@ def _leaving(f: Formation, cfg: FormationConfig, t: float) -> tuple[Formation, n
     sigma_v = np.sqrt(np.maximum(P[:, 2, 2] + P[:, 3, 3], 0.0))
     apart = np.linalg.norm(v - rigid, axis=1) > cfg.max_velocity_difference + 3.0 * sigma_v
     if n >= 2:
-        d = np.hypot(p[:, None, 0] - p[None, :, 0], p[:, None, 1] - p[None, :, 1])
+        d = _distances(p)
         np.fill_diagonal(d, np.inf)
         apart |= d.min(axis=1) > cfg.leave_distance
     since = np.where(apart, np.where(np.isnan(f.leaving), t, f.leaving), np.nan)
@@ -635,8 +642,7 @@ def _moving_together(
         local = np.flatnonzero(labels == g)
         if local.size < cfg.min_members:
             continue
-        q = p[local]
-        d = np.hypot(q[:, None, 0] - q[None, :, 0], q[:, None, 1] - q[None, :, 1])
+        d = _distances(p[local])
         np.fill_diagonal(d, np.inf)
         if d.min() < d_res:
             continue  # closer than the resolution distance: one unresolved object
