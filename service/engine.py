@@ -54,6 +54,7 @@ from service.viewers import ViewerHub
 from trackers.config import TrackerConfig
 from trackers.extended.tracker import ExtendedTracker, snapshot_of
 from trackers.formation.tracker import FormationTracker
+from trackers.peers import PointTrackState
 from trackers.pipeline import MAX_ABS_POSITION, TrackingPipeline
 from trackers.state import StateError
 from trackers.types import ScanRejected, StepResult, TrackSnapshot
@@ -199,6 +200,12 @@ class Engine:
         self._state_store = state_store
         self._checkpoint: EngineCheckpoint | None = None
         self._restore_pending = state_store is not None
+        # scale-out: tracks handed over from and to other instances, applied by the worker
+        # before its next batch; ``on_report(state)`` runs on the worker after each batch
+        self._hand_lock = threading.Lock()
+        self._handed_in: list[PointTrackState] = []
+        self._handed_over: list[str] = []
+        self.on_report: Callable[[ReportState], None] | None = None
 
     @property
     def sink(self) -> ReportSink:
@@ -521,6 +528,36 @@ class Engine:
 
         return self.call_in_worker(command, timeout)
 
+    # -- hand-over between instances (scale-out) ---------------------------------------------
+
+    def hand_in(self, states: list[PointTrackState]) -> None:
+        """Take over these individual tracks from another instance at the next batch
+        (:meth:`TrackingPipeline.hand_in`); any thread."""
+        with self._hand_lock:
+            self._handed_in.extend(states)
+
+    def hand_over(self, ids: list[str]) -> None:
+        """Drop these individual tracks at the next batch: another instance took them over
+        (:meth:`TrackingPipeline.hand_over`); any thread."""
+        with self._hand_lock:
+            self._handed_over.extend(ids)
+
+    def point_states(self, ids: list[str]) -> tuple[PointTrackState, ...]:
+        """The live individual tracks ``ids`` as hand-over records; the worker only (from
+        :attr:`on_report`)."""
+        return self._pipeline.point_states(ids)
+
+    def _take_handed(self) -> None:
+        if not (self._handed_in or self._handed_over):
+            return
+        with self._hand_lock:
+            states, self._handed_in = self._handed_in, []
+            ids, self._handed_over = self._handed_over, []
+        if states:
+            self._pipeline.hand_in(states)
+        if ids:
+            self._pipeline.hand_over(ids)
+
     def _refresh_state(self, at: float) -> None:
         """Replace the latest report by one with the same ``seq`` and the pipeline's tracks as
         they are now (the worker, after a command changed them). Not published over Zenoh:
@@ -711,6 +748,7 @@ class Engine:
 
     def _process(self, item: Item, batch: DetectionBatchIn) -> None:
         pipeline = self._pipeline
+        self._take_handed()
         try:
             scan = batch_to_scan(batch, pipeline.config.measurement.position_std)
             t0 = time.perf_counter()
@@ -740,3 +778,8 @@ class Engine:
         self._out.tracks(state.data)
         self.view.publish(state, scan.z)
         item.future.set_result(IngestResult(True, seq))
+        if self.on_report is not None:
+            try:
+                self.on_report(state)
+            except Exception:
+                log.exception("the report hook failed")

@@ -54,6 +54,26 @@ class Keys:
         """The queryable answering with the latest Track report."""
         return f"{self.prefix}/state/tracks"
 
+    def instance_tracks(self, instance_id: str) -> str:
+        """Scale-out: one instance's Track reports (``*`` for a subscriber: every instance;
+        ``{prefix}/tracks/**`` also matches ``{prefix}/tracks``)."""
+        return f"{self.prefix}/tracks/{instance_id}"
+
+    def instance_state(self, instance_id: str) -> str:
+        """Scale-out: the queryable answering with one instance's latest Track report
+        (``*``: every instance's; selector parameters ``status`` and ``kind``)."""
+        return f"{self.prefix}/state/tracks/{instance_id}"
+
+    def handover(self, instance_id: str) -> str:
+        """Scale-out: the queryable where an instance takes tracks leaving a neighbour's
+        sector (``*`` to offer them to every instance)."""
+        return f"{self.prefix}/handover/{instance_id}"
+
+    def config(self, instance_id: str) -> str:
+        """Scale-out: where an instance puts a configuration change for the others (``*``
+        for a subscriber)."""
+        return f"{self.prefix}/config/{instance_id}"
+
     def alive(self, instance_id: str) -> str:
         """A service instance's liveliness token; ``**`` for all of them."""
         return f"{self.prefix}/alive/{instance_id}"

@@ -8,6 +8,7 @@ Zenoh session and stops the engine, and the process exits with status 0.
 from __future__ import annotations
 
 import contextlib
+import functools
 import logging
 import secrets
 import signal
@@ -39,13 +40,15 @@ from service.config_store import load_config_file
 from service.config_tree import ConfigDocument, ConfigError, ConfigPatch
 from service.engine import Engine
 from service.files import remove_stale_temporaries
-from service.keys import local_endpoints
+from service.keys import Keys, local_endpoints
+from service.scale_out import ScaleOut, Sector
 from service.schemas import DetectionBatchIn, IngestConfig
 from service.settings import Settings, SettingsLoadError, api_token_source, load_settings
 from service.state_store import StateStore
 from service.stats import Stats
 from service.zenoh_io import ZenohIO
 from trackers.config import TrackerConfig
+from trackers.pipeline import TrackingPipeline
 
 __all__ = ["create_app", "main"]
 
@@ -127,10 +130,24 @@ class ServiceRuntime:
     client. :meth:`start` and :meth:`stop` are idempotent, so the entry point can start
     it before uvicorn (to fail early and cleanly) and the lifespan still stops it."""
 
-    def __init__(self, settings: Settings, engine: Engine) -> None:
+    def __init__(self, settings: Settings, engine: Engine, token: str = "") -> None:
         self.settings = settings
         self.engine = engine
         self.zenoh: ZenohIO | None = None
+        #: scale-out (setting scale_out): federated queries, hand-over, shared configuration
+        self.scale_out: ScaleOut | None = None
+        if settings.scale_out:
+            self.scale_out = ScaleOut(
+                engine=engine,
+                keys=Keys(settings.key_prefix),
+                instance_id=settings.instance_id,
+                token=token,
+                sector=Sector(*settings.sector) if settings.sector else None,
+                sector_margin=settings.sector_margin,
+                federate_timeout=settings.federate_timeout,
+            )
+            if settings.sector:
+                engine.on_report = self.scale_out.after_report
         self.demo: subprocess.Popen[bytes] | None = None
         self._lock = threading.Lock()
 
@@ -155,6 +172,8 @@ class ServiceRuntime:
                 refuse=self.engine.refuse_unread,
                 max_payload_bytes=s.max_batch_bytes,
                 max_message_bytes=s.zenoh_max_message_bytes,
+                detection_keys=s.detection_keys or None,
+                scale_out=self.scale_out,
             )
             self.engine.start()
             try:
@@ -294,9 +313,13 @@ def create_app(settings: Settings | None = None, token_source: str | None = None
         ingest_defaults=ingest_defaults,
         config_file=settings.config_file,
         state_store=_state_store(settings),
+        pipeline_factory=functools.partial(
+            TrackingPipeline.all_kinds,
+            id_prefix=f"{settings.instance_id}:" if settings.scale_out else "",
+        ),
     )
     token = _resolve_token(settings, token_source)
-    runtime = ServiceRuntime(settings, engine)
+    runtime = ServiceRuntime(settings, engine, token)
 
     @contextlib.asynccontextmanager
     async def lifespan(app: FastAPI) -> AsyncIterator[None]:

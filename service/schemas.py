@@ -541,6 +541,23 @@ class TrackOut(BaseModel):
     shape_probabilities: dict[str, float] | None = None
     members: list[str] | None = None
     formation_id: str | None = None
+    instance: str | None = Field(
+        default=None,
+        description="the instance that holds the track (only in a federated answer)",
+    )
+
+
+class FederationOut(BaseModel):
+    """Who answered a federated track query (``GET /api/v1/tracks`` with ``federate``)."""
+
+    answered: list[str] = Field(description="instances whose tracks are in the answer")
+    missing: list[str] = Field(
+        description=(
+            "instances alive (liveliness token) that did not answer within timeout_s, and "
+            "those whose token went away in the last ten minutes"
+        )
+    )
+    timeout_s: float
 
 
 class TrackReportOut(BaseModel):
@@ -556,6 +573,13 @@ class TrackReportOut(BaseModel):
     processing_ms: float
     tracks: list[TrackOut]
     deleted: list[str]
+    instances: FederationOut | None = Field(
+        default=None,
+        description=(
+            "a federated answer (setting federate): which instances answered; every track "
+            "then names its instance"
+        ),
+    )
 
 
 class ErrorReportOut(BaseModel):

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
 import re
 import secrets
@@ -18,6 +19,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Annotated, Any, Literal
 
+import zenoh
 from pydantic import (
     Field,
     SecretStr,
@@ -149,6 +151,52 @@ class Settings(BaseSettings):
     instance_id: str = Field(
         default_factory=lambda: secrets.token_hex(4),
         description="this instance's id in {prefix}/alive/{instance_id}",
+    )
+    detection_keys: Annotated[list[str], NoDecode] = Field(
+        default_factory=list,
+        description=(
+            "comma-separated Zenoh key expressions of the detection batches this instance "
+            "takes, each under {prefix}/detections/ (for example "
+            "tracking/detections/radar-west or tracking/detections/north-$*); "
+            "default: every sensor's, {prefix}/detections/**"
+        ),
+    )
+    scale_out: bool = Field(
+        default=False,
+        description=(
+            "one of several instances sharing the work: track ids qualified by instance_id "
+            "('west:T12'), reports on {prefix}/tracks/{instance_id}, a queryable on "
+            "{prefix}/state/tracks/{instance_id}, configuration changes shared with every "
+            "instance that has the same api_token, tracks handed over between sectors"
+        ),
+    )
+    sector: Annotated[list[float] | None, NoDecode] = Field(
+        default=None,
+        description=(
+            "scale-out: this instance's area, 'xmin,ymin,xmax,ymax' in metres; a confirmed "
+            "individual track more than sector_margin beyond it is handed over to the "
+            "instance whose sector holds it (none: no hand-over)"
+        ),
+    )
+    sector_margin: float = Field(
+        default=500.0,
+        ge=0,
+        allow_inf_nan=False,
+        description="scale-out: metres beyond its sector a track goes before it is handed over",
+    )
+    federate: bool = Field(
+        default=False,
+        description=(
+            "GET /api/v1/tracks gathers every instance's tracks over Zenoh and says which "
+            "instances answered (needs scale_out)"
+        ),
+    )
+    federate_timeout: float = Field(
+        default=1.0,
+        gt=0,
+        le=60,
+        allow_inf_nan=False,
+        description="seconds a federated query waits for the other instances' answers",
     )
     http_host: str = Field(default="127.0.0.1", description="REST listen address")
     http_port: int = Field(default=8000, ge=0, le=65535, description="REST port (0: any free port)")
@@ -301,6 +349,57 @@ class Settings(BaseSettings):
     def _split(cls, value: Any) -> list[str]:
         return split_endpoints(value)
 
+    @field_validator("detection_keys", mode="before")
+    @classmethod
+    def _split_keys(cls, value: Any) -> list[str]:
+        if value is None:
+            return []
+        if isinstance(value, str):
+            value = [] if value.strip().lower() in ("", "none") else value.split(",")
+        if not isinstance(value, list | tuple):
+            raise ValueError("expected a comma-separated string or a list of key expressions")
+        return [str(v).strip() for v in value if str(v).strip()]
+
+    @field_validator("sector", mode="before")
+    @classmethod
+    def _split_sector(cls, value: Any) -> Any:
+        if isinstance(value, str):
+            if value.strip().lower() in ("", "none"):
+                return None
+            return [v.strip() for v in value.split(",")]
+        return value
+
+    @field_validator("sector")
+    @classmethod
+    def _check_sector(cls, value: list[float] | None) -> list[float] | None:
+        if value is None:
+            return None
+        if len(value) != 4 or not all(math.isfinite(v) for v in value):
+            raise ValueError("must be four finite numbers: xmin,ymin,xmax,ymax")
+        xmin, ymin, xmax, ymax = value
+        if not (xmin < xmax and ymin < ymax):
+            raise ValueError("xmin must be below xmax and ymin below ymax")
+        return value
+
+    @model_validator(mode="after")
+    def _scale_out(self) -> Settings:
+        """Detection keys under the prefix's detections; what needs scale_out has it."""
+        head = f"{self.key_prefix}/detections/**"
+        for key in self.detection_keys:
+            if not detection_key_ok(key, head):
+                raise ValueError(
+                    _setting_error(
+                        "detection_keys",
+                        f"{key!r} is not a Zenoh key expression under {head}",
+                    )
+                )
+        for name in ("federate", "sector"):
+            if getattr(self, name) not in (None, False) and not self.scale_out:
+                raise ValueError(
+                    _setting_error(name, "needs scale_out (track ids qualified by the instance_id)")
+                )
+        return self
+
     @field_validator("log_level", "zenoh_mode", "tracks_congestion_control", mode="before")
     @classmethod
     def _lower(cls, value: Any) -> Any:
@@ -393,6 +492,15 @@ class Settings(BaseSettings):
         file_secret_settings: PydanticBaseSettingsSource,
     ) -> tuple[PydanticBaseSettingsSource, ...]:
         return (init_settings, env_settings, SettingsFileSource(settings_cls))
+
+
+def detection_key_ok(key: str, head: str) -> bool:
+    """Whether ``key`` is a Zenoh key expression that ``head`` (``{prefix}/detections/**``)
+    includes."""
+    try:
+        return bool(zenoh.KeyExpr(head).includes(zenoh.KeyExpr(key)))
+    except zenoh.ZError:
+        return False
 
 
 def _setting_error(name: str, message: str) -> str:

@@ -19,13 +19,16 @@ import threading
 from collections.abc import Callable
 from concurrent.futures import Future
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import zenoh
 
 from service.convert import dumps
 from service.keys import Keys, make_config
 from service.payload import too_large_detail
+
+if TYPE_CHECKING:
+    from service.scale_out import ScaleOut
 
 __all__ = ["ZenohIO", "parse_selector_filters"]
 
@@ -82,6 +85,8 @@ class ZenohIO:
         refuse: Callable[[int, str | None, str, str], Any] | None = None,
         max_payload_bytes: int | None = None,
         max_message_bytes: int | None = None,
+        detection_keys: list[str] | None = None,
+        scale_out: ScaleOut | None = None,
     ) -> None:
         self.mode = mode
         self.listen = listen
@@ -103,10 +108,18 @@ class ZenohIO:
         self._refuse = refuse
         self._max_payload_bytes = max_payload_bytes
         self._max_message_bytes = max_message_bytes
+        #: the detection keys subscribed to (default: every sensor's)
+        self.detection_keys = list(detection_keys or [self.keys.all_detections])
+        #: scale-out: reports on the instance's key, its own state queryable, and the rest
+        self.scale_out = scale_out
+        self.tracks_key = (
+            self.keys.instance_tracks(instance_id) if scale_out is not None else self.keys.tracks
+        )
+        self._subscribers: list[Any] = []
+        self._instance_queryable: Any = None
         self._lock = threading.Lock()
         self._closed = True
         self.session: zenoh.Session | None = None
-        self._subscriber: Any = None
         self._queryable: Any = None
         self._token: Any = None
         self._tracks_pub: zenoh.Publisher | None = None
@@ -127,15 +140,25 @@ class ZenohIO:
         session = zenoh.open(conf)
         try:
             self._tracks_pub = session.declare_publisher(
-                self.keys.tracks,
+                self.tracks_key,
                 encoding=_JSON,
                 congestion_control=self._cc,
                 reliability=zenoh.Reliability.RELIABLE,
             )
-            self._queryable = session.declare_queryable(self.keys.state, self._on_query)
+            self._queryable = session.declare_queryable(
+                self.keys.state, self._answer(self.keys.state)
+            )
+            if self.scale_out is not None:
+                key = self.keys.instance_state(self.instance_id)
+                self._instance_queryable = session.declare_queryable(key, self._answer(key))
+                self.scale_out.declare(session)
             self._token = session.liveliness().declare_token(self.keys.alive(self.instance_id))
-            self._subscriber = session.declare_subscriber(self.keys.all_detections, self._on_sample)
+            self._subscribers = [
+                session.declare_subscriber(key, self._on_sample) for key in self.detection_keys
+            ]
         except BaseException:
+            if self.scale_out is not None:
+                self.scale_out.undeclare()
             session.close()
             raise
         self.session = session
@@ -146,13 +169,13 @@ class ZenohIO:
             session.zid(),
             self.listen if self.mode != "client" else [],
             self.connect,
-            self.keys.all_detections,
+            ", ".join(self.detection_keys),
         )
 
     def stop_intake(self) -> None:
         """Stop taking detection batches (undeclare the subscriber); reports still go out."""
-        sub, self._subscriber = self._subscriber, None
-        if sub is not None:
+        subs, self._subscribers = self._subscribers, []
+        for sub in subs:
             try:
                 sub.undeclare()
             except Exception:
@@ -165,7 +188,16 @@ class ZenohIO:
                 return
             self._closed = True
         session = self.session
-        for entity in (self._subscriber, self._queryable, self._token, self._tracks_pub):
+        if self.scale_out is not None:
+            self.scale_out.undeclare()
+        entities = (
+            *self._subscribers,
+            self._queryable,
+            self._instance_queryable,
+            self._token,
+            self._tracks_pub,
+        )
+        for entity in entities:
             if entity is None:
                 continue
             try:
@@ -176,7 +208,8 @@ class ZenohIO:
             session.close()
         except Exception:
             log.exception("closing the zenoh session failed")
-        self._subscriber = self._queryable = self._token = self._tracks_pub = None
+        self._subscribers = []
+        self._queryable = self._instance_queryable = self._token = self._tracks_pub = None
         log.info("zenoh session closed")
 
     @property
@@ -210,7 +243,11 @@ class ZenohIO:
         except Exception:
             log.exception("could not take a detection batch")
 
-    def _on_query(self, query: zenoh.Query) -> None:
+    def _answer(self, key: str) -> Callable[[zenoh.Query], None]:
+        """The callback of the state queryable on ``key`` (answers under that key)."""
+        return lambda query: self._on_query(query, key)
+
+    def _on_query(self, query: zenoh.Query, key: str) -> None:
         try:
             params = str(query.parameters)
             if params and self._filtered is not None:
@@ -222,7 +259,7 @@ class ZenohIO:
                 data = dumps(self._filtered(status, kinds))
             else:
                 data = self._report_bytes()
-            query.reply(self.keys.state, data, encoding=_JSON)
+            query.reply(key, data, encoding=_JSON)
         except Exception:
             log.exception("could not answer a query")
         finally:

@@ -151,12 +151,14 @@ class _State:
 class _Counters:
     """The id and origin counters of one proposed step (the tracker's own move on commit)."""
 
-    def __init__(self, next_id: int, next_origin: int) -> None:
+    def __init__(self, next_id: int, next_origin: int, id_prefix: str = "") -> None:
         self.next_id = next_id
         self.next_origin = next_origin
+        self.id_prefix = id_prefix
 
     def ids(self, n: int) -> np.ndarray:
-        out = _objects([f"T{i}" for i in range(self.next_id, self.next_id + n)])
+        p = self.id_prefix
+        out = _objects([f"{p}T{i}" for i in range(self.next_id, self.next_id + n)])
         self.next_id += n
         return out
 
@@ -176,8 +178,11 @@ class IndividualTracker:
 
     kind = KIND
 
-    def __init__(self, config: TrackerConfig | None = None) -> None:
+    def __init__(self, config: TrackerConfig | None = None, *, id_prefix: str = "") -> None:
+        """``id_prefix`` goes before every new track's id (``{id_prefix}T12``): an instance's
+        qualifier when several share the work."""
         config = config or TrackerConfig()
+        self.id_prefix = id_prefix
         models = build_models(config.motion)
         self._state = _State(
             config=config,
@@ -289,7 +294,7 @@ class IndividualTracker:
         tm = config.track_management
         pd_sensor = tm.pd if scan.pd is None else float(scan.pd)
         lam_fa = tm.clutter_density if scan.clutter_density is None else float(scan.clutter_density)
-        counters = _Counters(self._state.next_id, self._state.next_origin)
+        counters = _Counters(self._state.next_id, self._state.next_origin, self.id_prefix)
 
         released: tuple[PointTrackState, ...] = ()
         if directives.release:
@@ -297,6 +302,10 @@ class IndividualTracker:
             out = np.isin(ids, np.array(sorted(directives.release), dtype=object))
             released = tuple(_state_of(pred, i, t) for i in np.flatnonzero(out).tolist())
             pred = pred.take(~out)
+
+        renamed: tuple[str, ...] = ()
+        if directives.hand_in:
+            pred, renamed = _handed_in(pred, directives.hand_in, counters)
 
         tracks = pred.tracks
         claims = np.full(scan.size, -np.inf)
@@ -335,7 +344,7 @@ class IndividualTracker:
         status = sequential_test(tracks.score, tracks.peak, tracks.confirmed, coast, tm)
         delete = status.delete
         delete[n_old:] = False  # a track is never deleted in the scan that starts or adopts it
-        deleted_ids = tuple(tracks.ids[delete & tracks.confirmed].tolist())
+        deleted_ids = renamed + tuple(tracks.ids[delete & tracks.confirmed].tolist())
         tracks = replace(tracks, confirmed=status.confirmed | (tracks.confirmed & ~delete))
         tracks = _frozen(tracks.take(~delete))
 
@@ -560,7 +569,7 @@ class IndividualTracker:
 
         The configuration in force stays. Tracks saved under other motion models restart
         their modes from their combined estimates, as :meth:`reconfigure` does."""
-        return _import(section, self.config)
+        return _import(section, self.config, self.id_prefix)
 
     def restore_state(self, checked: object) -> None:
         """Put a state that :meth:`check_state` returned in place of the current one."""
@@ -644,7 +653,7 @@ def _covariances_ok(P: np.ndarray) -> bool:
     return bool((diag > 0).all() and (asym <= 1e-6 * scale).all())
 
 
-def _import(section: StateSection, config: TrackerConfig) -> _State:
+def _import(section: StateSection, config: TrackerConfig, id_prefix: str = "") -> _State:
     """The :class:`_State` of a section that :meth:`Checkpoint.export` wrote, checked, under
     ``config``; :class:`StateError` naming the field when it cannot be used."""
     r = SectionReader(section, "point")
@@ -687,9 +696,10 @@ def _import(section: StateSection, config: TrackerConfig) -> _State:
 
     if len(set(ids)) != n or not all(ids):
         raise bad("track ids must be unique and not empty")
-    numbered = [int(s[1:]) for s in ids if s is not None and _NUMBERED_ID.match(s)]
+    own = [s.removeprefix(id_prefix) for s in ids if s is not None and s.startswith(id_prefix)]
+    numbered = [int(s[1:]) for s in own if _NUMBERED_ID.match(s)]
     if numbered and max(numbered) >= next_id:
-        raise bad(f"next_id {next_id} would give again the id T{max(numbered)}")
+        raise bad(f"next_id {next_id} would give again the id {id_prefix}T{max(numbered)}")
     origins = np.concatenate([tracks.origin, candidates.origin])
     if origins.size and int(origins.max()) >= next_origin:
         raise bad(f"next_origin {next_origin} is not above every origin ({int(origins.max())})")
@@ -841,6 +851,84 @@ def _adopted(
         detection_ids=_objects([()] * n),
         origin=counters.origins(n),
     )
+
+
+#: χ²(4) at 0.999: a handed-over track and a local one closer than this in position and
+#: velocity (their covariances summed) are one target.
+HAND_IN_GATE = 18.47
+
+
+def _handed_in(
+    pred: _Prediction, states: Sequence[PointTrackState], counters: _Counters
+) -> tuple[_Prediction, tuple[str, ...]]:
+    """``pred`` with the tracks another instance handed over (their ids kept), each
+    predicted from its own time to ``pred.time`` by the IMM (from the handed estimate in
+    every mode, with the configured initial mode probabilities; a state newer than the scan
+    is taken as it is), so that the scan updates them like the others.
+
+    A handed track that a local one already follows (Mahalanobis distance over position and
+    velocity, ``d² = Δᵀ (P_h + P_l)⁻¹ Δ < HAND_IN_GATE``) is not added: the nearest such
+    local track takes its id, its first time and the higher score and is confirmed. A state
+    whose id is live here already is ignored. Returns the new prediction and the confirmed
+    local ids that were renamed (gone from the reports under their old ids)."""
+    t, config, models = pred.time, pred.config, pred.models
+    live = set(pred.tracks.ids.tolist())
+    fresh = [st for st in states if st.id not in live]
+    if not fresh:
+        return pred, ()
+    born = _adopted(fresh, config, counters)
+    n = len(fresh)
+    x_pred, P_pred = born.x.copy(), born.P.copy()
+    c_bar = born.mu.copy()
+    for i, st in enumerate(fresh):
+        dt = max(0.0, t - st.time)
+        if dt > 0:
+            Pi = transition_matrix(config.motion.sojourn_times, dt)
+            xs, Ps, cs = imm_predict(
+                models, born.x[i : i + 1], born.P[i : i + 1], born.mu[i : i + 1], Pi, dt
+            )
+            x_pred[i], P_pred[i], c_bar[i] = xs[0], Ps[0], cs[0]
+    xc, Pc = imm_combine(x_pred, P_pred, c_bar)
+
+    tracks = pred.tracks
+    ids = tracks.ids.copy()
+    created, score = tracks.created.copy(), tracks.score.copy()
+    peak, confirmed = tracks.peak.copy(), tracks.confirmed.copy()
+    renamed: list[str] = []
+    add = np.ones(n, dtype=bool)
+    free = np.ones(len(tracks), dtype=bool)
+    for i, st in enumerate(fresh):
+        if not free.any():
+            break
+        d = pred.xc[:, :4] - xc[i, :4]
+        S = pred.Pc[:, :4, :4] + Pc[i, :4, :4]
+        d2 = np.einsum("ni,ni->n", d, np.linalg.solve(S, d[..., None])[..., 0])
+        d2[~free] = np.inf
+        k = int(np.argmin(d2))
+        if d2[k] >= HAND_IN_GATE:
+            continue
+        if confirmed[k]:
+            renamed.append(str(ids[k]))
+        ids[k] = st.id
+        created[k] = min(created[k], st.created)
+        score[k] = max(score[k], st.score)
+        peak[k] = max(peak[k], score[k])
+        confirmed[k] = True
+        free[k] = False
+        add[i] = False
+    tracks = replace(tracks, ids=ids, created=created, score=score, peak=peak, confirmed=confirmed)
+    keep = np.flatnonzero(add)
+    born = born.take(keep)
+    merged = replace(
+        pred,
+        tracks=tracks.concat(born),
+        x_pred=np.concatenate([pred.x_pred, x_pred[keep]]),
+        P_pred=np.concatenate([pred.P_pred, P_pred[keep]]),
+        c_bar=np.concatenate([pred.c_bar, c_bar[keep]]),
+        xc=np.concatenate([pred.xc, xc[keep]]),
+        Pc=np.concatenate([pred.Pc, Pc[keep]]),
+    )
+    return merged, tuple(renamed)
 
 
 def _missed_branch(time: np.ndarray, score: np.ndarray, t: float, miss: float) -> np.ndarray:

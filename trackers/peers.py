@@ -243,11 +243,15 @@ class PersistentTracker(Protocol):
 class PointDirectives:
     """What the peers ask of the point tracker for one scan: the detection probability of
     named tracks (``pd``, the resolution cells' already folded in; the sensor's elsewhere),
-    the ids the peers take over (``release``) and the tracks they hand back (``adopt``)."""
+    the ids the peers take over (``release``) and the tracks they hand back (``adopt``,
+    as of the scan's time). ``hand_in``: tracks another tracker (an instance watching the
+    next sector) hands over, each as of its own time: predicted to the scan and updated
+    with it, or merged into a local track that follows the same target."""
 
     pd: Mapping[str, float] = field(default_factory=dict)
     release: frozenset[str] = frozenset()
     adopt: tuple[PointTrackState, ...] = ()
+    hand_in: tuple[PointTrackState, ...] = ()
 
 
 @dataclass(frozen=True, eq=False)

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Sequence
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -30,6 +31,7 @@ from trackers.peers import (
     PersistentTracker,
     PointDirectives,
     PointTracker,
+    PointTrackState,
     PointTrackView,
     StateCheckpoint,
     check_proposal,
@@ -61,20 +63,24 @@ MAX_ABS_TIME = 1e12
 
 
 #: The point trackers by ``association.method``.
-POINT_TRACKERS: dict[str, Callable[[TrackerConfig], PointTracker]] = {"gnn": IndividualTracker}
+POINT_TRACKERS: dict[str, Callable[..., PointTracker]] = {"gnn": IndividualTracker}
 
 
-def make_point_tracker(config: TrackerConfig) -> PointTracker:
-    """The point tracker that ``config.association.method`` names."""
-    return POINT_TRACKERS[config.association.method](config)
+def make_point_tracker(config: TrackerConfig, *, id_prefix: str = "") -> PointTracker:
+    """The point tracker that ``config.association.method`` names; ``id_prefix`` before
+    every new track's id."""
+    return POINT_TRACKERS[config.association.method](config, id_prefix=id_prefix)
 
 
-def standard_peers(config: TrackerConfig) -> tuple[PeerTracker, ...]:
+def standard_peers(config: TrackerConfig, *, id_prefix: str = "") -> tuple[PeerTracker, ...]:
     """One of each peer kind, in the order they see a scan: extended objects and groups
     (:mod:`trackers.extended`), then formations (:mod:`trackers.formation`), which see
     neither the detections nor the tracks the extended tracker took: a convoy of unresolved
     returns is never a formation."""
-    return (ExtendedTracker(config), FormationTracker(config))
+    return (
+        ExtendedTracker(config, id_prefix=id_prefix),
+        FormationTracker(config, id_prefix=id_prefix),
+    )
 
 
 def _view_without(view: PointTrackView, taken: set[str]) -> PointTrackView:
@@ -186,14 +192,23 @@ class TrackingPipeline:
         if len(set(kinds)) != len(kinds):
             raise ValueError(f"two peers of one kind: {kinds}")
         self._last_time: float | None = None
+        self._hand_in: dict[str, PointTrackState] = {}
+        self._hand_over: set[str] = set()
 
     @classmethod
-    def all_kinds(cls, config: TrackerConfig | None = None) -> TrackingPipeline:
+    def all_kinds(
+        cls, config: TrackerConfig | None = None, *, id_prefix: str = ""
+    ) -> TrackingPipeline:
         """A pipeline with every track kind the trackers have: the point tracker and the
         peers of :func:`standard_peers` (each switched on and off by its configuration
-        section). The service runs this one."""
+        section). The service runs this one. ``id_prefix`` goes before every new track's id
+        (an instance's qualifier when several instances share the work)."""
         config = config or TrackerConfig()
-        return cls(config, peers=standard_peers(config))
+        return cls(
+            config,
+            peers=standard_peers(config, id_prefix=id_prefix),
+            point_tracker=make_point_tracker(config, id_prefix=id_prefix),
+        )
 
     @property
     def individual(self) -> PointTracker:
@@ -215,14 +230,51 @@ class TrackingPipeline:
         for peer in self.peers:
             peer.reconfigure(config)
 
+    # -- hand-over between trackers of neighbouring sectors ---------------------------------
+
+    def hand_in(self, states: Sequence[PointTrackState]) -> None:
+        """Take over these individual tracks (from another instance) at the next scan: each
+        is predicted from its own time to the scan's and updated with it under its own id,
+        or gives its id to a local track that follows the same target
+        (:attr:`PointDirectives.hand_in`). A later state for the same id replaces one still
+        waiting; an id handed over from here and back again is kept."""
+        for st in states:
+            self._hand_in[st.id] = st
+            self._hand_over.discard(st.id)
+
+    def hand_over(self, ids: Sequence[str]) -> None:
+        """Drop these individual tracks at the next scan: another instance has taken them
+        over (they are not reported as deleted)."""
+        self._hand_over.update(ids)
+
+    def point_states(self, ids: Sequence[str]) -> tuple[PointTrackState, ...]:
+        """The live individual tracks ``ids`` (unknown ids skipped) as hand-over records at
+        the last processed time."""
+        if self._last_time is None or not ids:
+            return ()
+        view = self.point.predicted(self._last_time)
+        index = view.index()
+        return tuple(view.state(index[tid]) for tid in ids if tid in index)
+
+    def _with_hand_over(self, directives: PointDirectives) -> PointDirectives:
+        if not (self._hand_in or self._hand_over):
+            return directives
+        return replace(
+            directives,
+            release=directives.release | self._hand_over,
+            hand_in=tuple(self._hand_in.values()),
+        )
+
     def process(self, scan: Scan) -> StepResult:
         """Run one scan through every tracker. Raise ``ScanRejected`` for an unusable scan and
         ``PeerError`` for a failing peer; either way no tracker changes."""
         check_scan(scan, self._last_time)
         if not self.peers:
-            proposal = self.point.propose(scan, PointDirectives())
+            proposal = self.point.propose(scan, self._with_hand_over(PointDirectives()))
             self.point.commit(proposal)
             self._last_time = scan.time
+            self._hand_in.clear()
+            self._hand_over.clear()
             return proposal.result
         view = self.point.predicted(scan.time)
         # The peers see the scan one after another, each without the detections claimed
@@ -247,13 +299,15 @@ class TrackingPipeline:
             if prop.take:
                 peer_view = _view_without(peer_view, set(prop.take))
         kinds = tuple(p.kind for p in self.peers)
-        directives = combine_directives(kinds, tuple(proposals), view)
+        directives = self._with_hand_over(combine_directives(kinds, tuple(proposals), view))
         point = self.point.propose(scan.subset(~claimed), directives)
         # Commit: every tracker has proposed without error.
         for peer, prop in zip(self.peers, proposals, strict=True):
             peer.commit(prop)
         self.point.commit(point)
         self._last_time = scan.time
+        self._hand_in.clear()
+        self._hand_over.clear()
         peer_all = tuple(t for prop in proposals for t in prop.tracks)
         peer_confirmed = tuple(t for t in peer_all if t.confirmed)
         deleted = tuple(d for prop in proposals for d in prop.deleted)

@@ -18,7 +18,7 @@ from fastapi import APIRouter, HTTPException, Request
 from fastapi.concurrency import run_in_threadpool
 from fastapi.responses import Response
 
-from service.api.deps import EngineDep, FastJSONResponse, WriteAccess
+from service.api.deps import EngineDep, FastJSONResponse, WriteAccess, shared_config
 from service.config_tree import ConfigDocument, ConfigError
 from service.engine import Engine
 
@@ -79,13 +79,16 @@ def _header_value(text: str) -> str:
     return text
 
 
-async def _apply(engine: Engine, doc: Any, *, merge: bool) -> Response:
+async def _apply(request: Request, engine: Engine, doc: Any, *, merge: bool) -> Response:
     try:
         applied = await run_in_threadpool(lambda: engine.apply_config(doc, merge=merge))
     except ConfigError as exc:
         raise HTTPException(status_code=422, detail=str(exc)) from None
     except OSError as exc:
         raise HTTPException(status_code=500, detail=str(exc)) from None
+    share = shared_config(request)
+    if share is not None and applied.changes:  # every instance of a scaled-out deployment
+        share.share_config(applied.document)
     response = FastJSONResponse(applied.document)
     response.headers[CHANGED_HEADER] = _header_value("; ".join(applied.changes) or "none")
     if applied.saved_to is not None:
@@ -119,7 +122,7 @@ _WRITE_RESPONSES[200] = {
     responses=_WRITE_RESPONSES,
 )
 async def put_config(request: Request, engine: EngineDep, _auth: WriteAccess) -> Response:
-    return await _apply(engine, await _read_json(request), merge=False)
+    return await _apply(request, engine, await _read_json(request), merge=False)
 
 
 @router.patch(
@@ -132,4 +135,4 @@ async def put_config(request: Request, engine: EngineDep, _auth: WriteAccess) ->
     responses=_WRITE_RESPONSES,
 )
 async def patch_config(request: Request, engine: EngineDep, _auth: WriteAccess) -> Response:
-    return await _apply(engine, await _read_json(request), merge=True)
+    return await _apply(request, engine, await _read_json(request), merge=True)

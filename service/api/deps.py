@@ -12,6 +12,7 @@ from fastapi.responses import JSONResponse
 from fastapi.security import HTTPAuthorizationCredentials, HTTPBearer
 
 from service.engine import Engine
+from service.scale_out import ScaleOut
 from service.settings import Settings
 from service.stats import Stats
 
@@ -21,10 +22,12 @@ __all__ = [
     "SettingsDep",
     "StatsDep",
     "WriteAccess",
+    "federation_of",
     "get_engine",
     "get_settings",
     "get_stats",
     "require_token",
+    "shared_config",
 ]
 
 
@@ -33,6 +36,21 @@ class FastJSONResponse(JSONResponse):
 
     def render(self, content: Any) -> bytes:
         return orjson.dumps(content, option=orjson.OPT_SERIALIZE_NUMPY)
+
+
+def federation_of(request: Request) -> ScaleOut | None:
+    """The scale-out part that answers federated track queries (setting ``federate``)."""
+    settings: Settings = request.app.state.settings
+    if not settings.federate:
+        return None
+    scale_out: ScaleOut | None = request.app.state.runtime.scale_out
+    return scale_out
+
+
+def shared_config(request: Request) -> ScaleOut | None:
+    """The scale-out part that shares configuration changes (setting ``scale_out``)."""
+    scale_out: ScaleOut | None = request.app.state.runtime.scale_out
+    return scale_out
 
 
 def get_engine(request: Request) -> Engine:

@@ -5,10 +5,11 @@ from __future__ import annotations
 
 from typing import Annotated, Literal
 
-from fastapi import APIRouter, HTTPException, Query
+from fastapi import APIRouter, HTTPException, Query, Request
+from fastapi.concurrency import run_in_threadpool
 from fastapi.responses import Response
 
-from service.api.deps import EngineDep, FastJSONResponse
+from service.api.deps import EngineDep, FastJSONResponse, federation_of
 from service.schemas import TrackOut, TrackReportOut
 
 __all__ = ["router"]
@@ -23,10 +24,14 @@ router = APIRouter(prefix="/tracks", tags=["tracks"])
     description=(
         "The Track report of the last processed batch. By default it holds the confirmed "
         "tracks, as published on `{prefix}/tracks`; `status=all` adds the tentative tracks, "
-        "`status=tentative` keeps only those; `kind` (comma-separated) keeps those kinds."
+        "`status=tentative` keeps only those; `kind` (comma-separated) keeps those kinds. "
+        "With the setting `federate` (scale-out), every instance's tracks, gathered over "
+        "Zenoh within `federate_timeout`, each with its `instance`, and `instances` saying "
+        "which answered."
     ),
 )
 async def list_tracks(
+    request: Request,
     engine: EngineDep,
     status: Annotated[
         Literal["confirmed", "tentative", "all"], Query(description="which tracks")
@@ -36,9 +41,13 @@ async def list_tracks(
         Query(description="individual, extended or formation (comma-separated)"),
     ] = None,
 ) -> Response:
+    kinds = {k.strip() for k in kind.split(",") if k.strip()} if kind else None
+    federation = federation_of(request)
+    if federation is not None:
+        answer = await run_in_threadpool(federation.federated_tracks, status, kinds)
+        return FastJSONResponse(answer)
     if kind is None and status == "confirmed":
         return Response(engine.latest_report_bytes(), media_type="application/json")
-    kinds = {k.strip() for k in kind.split(",") if k.strip()} if kind else None
     return FastJSONResponse(engine.tracks(status, kinds))
 
 
@@ -48,8 +57,12 @@ async def list_tracks(
     summary="One live track (tentative ones too)",
     responses={404: {"description": "no live track has this id"}},
 )
-async def get_track(track_id: str, engine: EngineDep) -> Response:
-    track = engine.track(track_id)
+async def get_track(request: Request, track_id: str, engine: EngineDep) -> Response:
+    federation = federation_of(request)
+    if federation is not None:
+        track = await run_in_threadpool(federation.federated_track, track_id)
+    else:
+        track = engine.track(track_id)
     if track is None:
         raise HTTPException(status_code=404, detail=f"no live track {track_id!r}")
     return FastJSONResponse(track)

@@ -308,3 +308,77 @@ def test_two_peers_of_one_kind_are_refused():
         TrackingPipeline(
             SINGLE_POINT, peers=[ScriptedPeer("x", nothing), ScriptedPeer("x", nothing)]
         )
+
+
+# -- hand-over between the trackers of neighbouring sectors ---------------------------------
+
+
+def _crossing(pipeline, times, x0=-4000.0, speed=200.0, y=1000.0):
+    for t in times:
+        pipeline.process(scan_at(t, [[x0 + speed * t, y]], R=np.tile(400.0 * np.eye(2), (1, 1, 1))))
+
+
+def test_new_ids_carry_the_instance_prefix():
+    p = TrackingPipeline.all_kinds(SINGLE_POINT, id_prefix="west:")
+    p.process(scan_at(0.0, [[0.0, 0.0]]))
+    assert [s.id for s in p.snapshot()] == ["west:T1"]
+    assert p.peers[0].id_prefix == p.peers[1].id_prefix == "west:"
+
+
+def test_a_handed_track_is_predicted_to_the_scan_and_updated_under_its_id():
+    west = TrackingPipeline.all_kinds(id_prefix="west:")
+    _crossing(west, [2.0 * k for k in range(8)])  # to x = -1200 at t = 14
+    (track,) = [s for s in west.snapshot() if s.confirmed]
+    states = west.point_states([track.id, "west:T999"])  # an unknown id is skipped
+    assert [st.id for st in states] == [track.id] and states[0].time == 14.0
+
+    east = TrackingPipeline.all_kinds(id_prefix="east:")
+    east.process(scan_at(10.0, [[50000.0, 0.0]]))  # the east has seen nothing of it
+    east.hand_in(states)
+    east.process(scan_at(18.0, [[-4000.0 + 200.0 * 18.0, 1000.0]]))
+    got = {s.id: s for s in east.snapshot()}
+    assert track.id in got
+    moved = got[track.id]
+    assert moved.confirmed and moved.created == track.created
+    assert moved.hits == track.hits + 1  # predicted 4 s ahead and updated with the scan
+    assert abs(moved.position[0] - (-400.0)) < 60.0
+    assert abs(moved.velocity[0] - 200.0) < 20.0
+
+    west.hand_over([track.id])
+    west.process(scan_at(18.0, []))
+    result_ids = [s.id for s in west.snapshot()]
+    assert track.id not in result_ids
+
+
+def test_a_handed_track_renames_the_local_track_of_the_same_target():
+    west = TrackingPipeline.all_kinds(id_prefix="west:")
+    east = TrackingPipeline.all_kinds(id_prefix="east:")
+    _crossing(west, [2.0 * k for k in range(10)])
+    _crossing(east, [2.0 * k for k in range(10)])  # both follow it near the boundary
+    (local,) = [s for s in east.snapshot() if s.confirmed]
+    assert local.id == "east:T1"
+    states = west.point_states([s.id for s in west.snapshot() if s.confirmed])
+    east.hand_in(states)
+    east.hand_in(states)  # offered twice: taken once
+    step = east.process(scan_at(20.0, [[-4000.0 + 200.0 * 20.0, 1000.0]]))
+    ids = [s.id for s in east.snapshot()]
+    assert ids == ["west:T1"], ids
+    assert "east:T1" in step.deleted  # gone under its old id
+    # a far track is not merged: it is added beside the local ones
+    far = replace(states[0], id="west:T77", x=np.array([30000.0, 0.0, 0.0, 0.0, 0.0]))
+    east.hand_in([far])
+    east.process(scan_at(22.0, [[-4000.0 + 200.0 * 22.0, 1000.0]]))
+    assert sorted(s.id for s in east.snapshot()) == ["west:T1", "west:T77"]
+
+
+def test_a_rejected_scan_keeps_the_hand_over_for_the_next():
+    west = TrackingPipeline.all_kinds(id_prefix="west:")
+    _crossing(west, [2.0 * k for k in range(6)])
+    states = west.point_states([s.id for s in west.snapshot() if s.confirmed])
+    east = TrackingPipeline.all_kinds(id_prefix="east:")
+    east.process(scan_at(10.0, []))
+    east.hand_in(states)
+    with pytest.raises(ScanRejected):
+        east.process(scan_at(5.0, []))  # out of sequence
+    east.process(scan_at(12.0, []))
+    assert [s.id for s in east.snapshot()] == [states[0].id]

@@ -289,8 +289,10 @@ class ExtendedTracker:
 
     kind = "extended"
 
-    def __init__(self, config: TrackerConfig | None = None) -> None:
+    def __init__(self, config: TrackerConfig | None = None, *, id_prefix: str = "") -> None:
+        """``id_prefix`` goes before every new track's id (``{id_prefix}E3``)."""
         config = config or TrackerConfig()
+        self.id_prefix = id_prefix
         self._state = _State(config=config.extended, management=config.track_management)
 
     # -- the peer interface ------------------------------------------------------------------
@@ -348,7 +350,7 @@ class ExtendedTracker:
         P = np.diag([position_std**2] * 2 + [velocity_std**2] * 2)
         est = ExtendedEstimate(x=x, P=P, X=X, alpha=10.0)
         track = ExtendedTrack(
-            id=f"E{state.next_id}",
+            id=f"{self.id_prefix}E{state.next_id}",
             estimate=est,
             time=float(time),
             score=state.management.confirm_threshold,
@@ -486,7 +488,7 @@ class ExtendedTracker:
             if splitting:
                 claimed[split_rows] = True
                 child = _born(
-                    f"E{next_id}",
+                    f"{self.id_prefix}E{next_id}",
                     scan,
                     split_rows,
                     split_v,
@@ -655,7 +657,7 @@ class ExtendedTracker:
                 candidates.append(_Candidate.first(run.centroid, t))
                 continue
             track = _born(
-                f"E{next_id}",
+                f"{self.id_prefix}E{next_id}",
                 scan,
                 rows,
                 run.velocity,

@@ -186,7 +186,9 @@ class FormationTracker:
 
     kind = KIND
 
-    def __init__(self, config: TrackerConfig | None = None) -> None:
+    def __init__(self, config: TrackerConfig | None = None, *, id_prefix: str = "") -> None:
+        """``id_prefix`` goes before every new formation's id (``{id_prefix}F2``)."""
+        self.id_prefix = id_prefix
         self._state = _State(config=config or TrackerConfig())
 
     @property
@@ -236,7 +238,7 @@ class FormationTracker:
                 raise ValueError(f"members: track {tid!r} is already in formation {taken[tid]!r}")
             if tid not in index:
                 raise ValueError(f"members: no live individual track {tid!r}")
-        fid = f"F{st.next_id}"
+        fid = f"{self.id_prefix}F{st.next_id}"
         rows = [index[tid] for tid in ids]
         snap = formation_snapshots(
             _new_formation(fid, rows, view, st.config), st.config.motion.models
@@ -277,7 +279,7 @@ class FormationTracker:
                 taken.extend(live)
         groups, ripe = _moving_together(view, config, st.groups, t, exclude=set(taken))
         for rows in ripe:
-            formations.append(_new_formation(f"F{next_id}", rows, view, config))
+            formations.append(_new_formation(f"{self.id_prefix}F{next_id}", rows, view, config))
             taken.extend(view.ids[i] for i in rows)
             next_id += 1
         # Matching and update.
