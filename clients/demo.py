@@ -25,6 +25,7 @@ import argparse
 import logging
 import math
 import os
+import re
 import signal
 import sys
 import threading
@@ -120,10 +121,15 @@ class Demo:
         query_timeout: float = 2.0,
         parent: int | None = None,
         scenario: str = "continuous",
+        sensor_id: str = "radar-1",
+        centre: tuple[float, float] = (0.0, 0.0),
     ) -> None:
         if scenario not in SCENARIOS:
             raise ValueError(f"scenario: one of {', '.join(SCENARIOS)}, got {scenario!r}")
         self.scenario = scenario
+        #: the continuous scenario's radar: its id, and where it stands (its area around it)
+        self.sensor_id = sensor_id
+        self.centre = centre
         self.session = session
         self.keys = keys
         self.publisher = BatchPublisher(session, keys.prefix, wait_matching=wait_matching)
@@ -147,7 +153,14 @@ class Demo:
 
     def _run_continuous(self) -> None:
         """The continuous scenario, forever, its times shifted to after the service's latest."""
-        scenario = ContinuousScenario(seed=self.seed)
+        cx, cy = self.centre
+        (x0, x1), (y0, y1) = ContinuousScenario.area
+        scenario = ContinuousScenario(
+            seed=self.seed,
+            sensor_id=self.sensor_id,
+            sensor_position=self.centre,
+            area=((x0 + cx, x1 + cx), (y0 + cy, y1 + cy)),
+        )
         report = latest_report(self.session, self.keys, self.query_timeout)
         last = None if report is None else report.get("time")
         offset = 0.0 if last is None else float(last) + scenario.dt
@@ -242,6 +255,21 @@ def build_parser() -> argparse.ArgumentParser:
     )
     parser.add_argument("--seed", type=int, default=0, help="scenario seed (default 0)")
     parser.add_argument(
+        "--sensor-id",
+        default="radar-1",
+        help="the continuous scenario's radar id, the last chunk of its key (default radar-1)",
+    )
+    parser.add_argument(
+        "--centre",
+        type=_point,
+        default=(0.0, 0.0),
+        metavar="X,Y",
+        help=(
+            "where the continuous scenario's radar stands, metres; its 20 km square area "
+            "is around it (default 0,0; write --centre=-15000,0 for a negative x)"
+        ),
+    )
+    parser.add_argument(
         "--speed", type=float, default=1.0, help="times real time (default 1: real time)"
     )
     parser.add_argument(
@@ -269,6 +297,17 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _point(text: str) -> tuple[float, float]:
+    """``"x,y"`` -> ``(x, y)``, finite metres."""
+    try:
+        x, y = (float(v) for v in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected X,Y in metres, got {text!r}") from None
+    if not (math.isfinite(x) and math.isfinite(y)):
+        raise argparse.ArgumentTypeError(f"expected finite X,Y, got {text!r}")
+    return x, y
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
@@ -276,6 +315,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         parser.error("--summary-interval: must be > 0")
     if not args.speed > 0:
         parser.error("--speed: must be > 0")
+    if not re.fullmatch(r"[A-Za-z0-9_.\-]{1,64}", args.sensor_id):
+        parser.error("--sensor-id: 1 to 64 of A-Z a-z 0-9 _ . -")
     logging.basicConfig(
         level=args.log_level.upper(),
         format="%(asctime)s %(levelname)-7s %(name)s: %(message)s",
@@ -300,6 +341,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         wait_matching=args.wait_matching,
         parent=parent,
         scenario=args.scenario,
+        sensor_id=args.sensor_id,
+        centre=args.centre,
     )
     try:
         log.info(

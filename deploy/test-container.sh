@@ -105,9 +105,9 @@ ok "hadolint deploy/Dockerfile (no errors)"
 ok "kubernetes-validate --strict deploy/k8s/*.yaml"
 SERVICES=$("$CACHE/compose/bin/docker-compose" -f deploy/compose.yaml config --services) ||
     die "docker-compose config: deploy/compose.yaml is not valid"
-[ "$(echo "$SERVICES" | sort | tr '\n' ' ')" = "publisher router tracker-1 tracker-2 " ] ||
+[ "$(echo "$SERVICES" | sort | tr '\n' ' ')" = "publisher-east publisher-west router tracker-east tracker-west " ] ||
     die "deploy/compose.yaml: services $(echo "$SERVICES" | tr '\n' ' ')"
-ok "docker-compose config deploy/compose.yaml: router, tracker-1, tracker-2, publisher"
+ok "docker-compose config deploy/compose.yaml: router, tracker-west, tracker-east, two publishers"
 say "offline checks done ($(elapsed))"
 
 # --- can podman run here at all? -------------------------------------------------------------

@@ -188,6 +188,12 @@ class ServiceRuntime:
                 raise ZenohStartError(msg) from None
             self.engine.sink = zio
             self.zenoh = zio
+            if s.scale_out and s.zenoh_mode == "peer" and not s.zenoh_listen:
+                log.warning(
+                    "scale-out as a Zenoh peer that listens nowhere: the other instances "
+                    "cannot reach this one (federated queries, hand-overs). Connect to the "
+                    "router as a client (zenoh_mode client) or listen on an address they reach"
+                )
             if s.demo:
                 self._start_demo()
             log.info(

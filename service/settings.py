@@ -393,6 +393,14 @@ class Settings(BaseSettings):
                         f"{key!r} is not a Zenoh key expression under {head}",
                     )
                 )
+        if self.scale_out and self.api_token is None and self.api_token_file is None:
+            raise ValueError(
+                _setting_error(
+                    "scale_out",
+                    "needs api_token or api_token_file: the instances seal what they send "
+                    "each other with the token they share (a generated one differs each start)",
+                )
+            )
         for name in ("federate", "sector"):
             if getattr(self, name) not in (None, False) and not self.scale_out:
                 raise ValueError(

@@ -81,7 +81,7 @@ def test_the_token_is_a_secret_everywhere() -> None:
 
     compose = yaml.safe_load((DEPLOY / "compose.yaml").read_text())
     assert compose["secrets"]["tracker_api_token"] == {"file": "./secrets/api-token"}
-    for name in ("tracker-1", "tracker-2"):
+    for name in ("tracker-west", "tracker-east"):
         service = compose["services"][name]
         assert service["secrets"] == ["tracker_api_token"]
         assert service["environment"]["TRACKER_API_TOKEN_FILE"] == "/run/secrets/tracker_api_token"
@@ -90,19 +90,35 @@ def test_the_token_is_a_secret_everywhere() -> None:
 def test_everything_meets_at_the_router() -> None:
     compose = yaml.safe_load((DEPLOY / "compose.yaml").read_text())
     services = compose["services"]
-    assert set(services) == {"router", "tracker-1", "tracker-2", "publisher"}
+    assert set(services) == {
+        "router",
+        "tracker-west",
+        "tracker-east",
+        "publisher-west",
+        "publisher-east",
+    }
     assert services["router"]["image"].startswith("docker.io/eclipse/zenoh:")
     assert "./zenoh-router.json5:/etc/zenoh/router.json5:ro" in services["router"]["volumes"]
-    ids = set()
-    for name in ("tracker-1", "tracker-2"):
-        env = services[name]["environment"]
+    sectors = {}
+    for side in ("west", "east"):
+        env = services[f"tracker-{side}"]["environment"]
         assert env["TRACKER_ZENOH_CONNECT"] == "tcp/router:7447"
-        ids.add(env["TRACKER_INSTANCE_ID"])
-        assert services[name]["build"]["dockerfile"] == "deploy/Dockerfile"
-    assert len(ids) == 2
-    command = services["publisher"]["command"]
-    assert command[:3] == ["python", "-m", "clients.demo"]
-    assert "tcp/router:7447" in command
+        assert env["TRACKER_INSTANCE_ID"] == side
+        assert services[f"tracker-{side}"]["build"]["dockerfile"] == "deploy/Dockerfile"
+        # the settings are valid, each instance on its own radar's key and sector
+        settings = Settings(
+            **{_setting(k): v for k, v in env.items() if k != "TRACKER_API_TOKEN_FILE"},
+            api_token="x",
+            config_file=None,
+        )
+        assert settings.scale_out and settings.federate
+        sectors[side] = settings.sector
+        assert settings.detection_keys == [f"tracking/detections/radar-{side}"]
+        command = services[f"publisher-{side}"]["command"]
+        assert command[:3] == ["python", "-m", "clients.demo"]
+        assert "tcp/router:7447" in command
+        assert command[command.index("--sensor-id") + 1] == f"radar-{side}"
+    assert sectors["west"][2] == sectors["east"][0] == 0.0  # they meet at x = 0
     # the settings in the ConfigMap go to the router's Service
     k8s = _k8s()
     data = k8s[("ConfigMap", "tracker-settings")]["data"]

@@ -52,6 +52,8 @@ class Deployment:
 
     def start_instance(self, name: str, sector: str) -> ServiceProcess:
         proc = ServiceProcess(
+            "--zenoh-mode",
+            "client",  # nothing but the router joins them
             "--zenoh-connect",
             self.router_endpoint,
             "--scale-out",
@@ -292,6 +294,8 @@ def test_scale_out_settings() -> None:
     s = load_settings(
         [
             "--scale-out",
+            "--api-token",
+            "t",
             "--instance-id",
             "west",
             "--sector=-1e4,-5e3,0,5e3",
@@ -305,8 +309,9 @@ def test_scale_out_settings() -> None:
     for argv, text in (
         (["--federate"], "needs scale_out"),
         (["--sector=0,0,1,1"], "needs scale_out"),
-        (["--scale-out", "--sector", "1,2,3"], "four finite numbers"),
-        (["--scale-out", "--sector", "1,2,0,3"], "below xmax"),
+        (["--scale-out", "--api-token", "t", "--sector", "1,2,3"], "four finite numbers"),
+        (["--scale-out", "--api-token", "t", "--sector", "1,2,0,3"], "below xmax"),
+        (["--scale-out"], "needs api_token"),
         (["--detection-keys", "other/radar-1"], "under tracking/detections/"),
         (["--detection-keys", "tracking//x"], "not a Zenoh key expression"),
     ):
