@@ -393,6 +393,16 @@ class Settings(BaseSettings):
                         f"{key!r} is not a Zenoh key expression under {head}",
                     )
                 )
+        keys = self.detection_keys
+        for i, a in enumerate(keys):
+            for b in keys[i + 1 :]:
+                if zenoh.KeyExpr(a).intersects(zenoh.KeyExpr(b)):
+                    raise ValueError(
+                        _setting_error(
+                            "detection_keys",
+                            f"{a!r} and {b!r} overlap: a batch on both would come twice",
+                        )
+                    )
         if self.scale_out and self.api_token is None and self.api_token_file is None:
             raise ValueError(
                 _setting_error(

@@ -314,6 +314,7 @@ def test_scale_out_settings() -> None:
         (["--scale-out"], "needs api_token"),
         (["--detection-keys", "other/radar-1"], "under tracking/detections/"),
         (["--detection-keys", "tracking//x"], "not a Zenoh key expression"),
+        (["--detection-keys", "tracking/detections/r-1,tracking/detections/*"], "overlap"),
     ):
         with pytest.raises(SettingsLoadError, match=text):
             load_settings(argv)
