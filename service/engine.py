@@ -141,6 +141,22 @@ class _Command:
             self.future.set_exception(EngineUnavailable(reason))
 
 
+PeerT = TypeVar("PeerT")
+
+
+def _switched_on_peer(pipeline: TrackingPipeline, kind: str, cls: type[PeerT]) -> PeerT:
+    """The pipeline's peer of ``kind`` (a ``cls``) for a command; refused as a conflict when
+    the pipeline has none or its configuration section ``{kind}.enabled`` is false."""
+    tracker = next((p for p in pipeline.peers if p.kind == kind), None)
+    if not isinstance(tracker, cls):
+        raise CommandRefused(f"{kind} tracking is not part of this tracker", conflict=True)
+    if not getattr(pipeline.config, kind).enabled:
+        raise CommandRefused(
+            f"{kind} tracking is switched off (configuration {kind}.enabled)", conflict=True
+        )
+    return tracker
+
+
 class Engine:
     """One tracking pipeline behind a bounded queue and one worker thread."""
 
@@ -456,14 +472,7 @@ class Engine:
         pos, vel, ext = _extended_prior(position, velocity, extent)
 
         def command(pipeline: TrackingPipeline) -> dict[str, Any]:
-            tracker = next((p for p in pipeline.peers if p.kind == "extended"), None)
-            if not isinstance(tracker, ExtendedTracker):
-                raise CommandRefused("extended tracking is not part of this tracker", conflict=True)
-            if not pipeline.config.extended.enabled:
-                raise CommandRefused(
-                    "extended tracking is switched off (configuration extended.enabled)",
-                    conflict=True,
-                )
+            tracker = _switched_on_peer(pipeline, "extended", ExtendedTracker)
             last = pipeline.last_time
             if last is None:
                 if at is None:
@@ -507,16 +516,7 @@ class Engine:
         :meth:`call_in_worker`."""
 
         def command(pipeline: TrackingPipeline) -> dict[str, Any]:
-            tracker = next((p for p in pipeline.peers if p.kind == "formation"), None)
-            if not isinstance(tracker, FormationTracker):
-                raise CommandRefused(
-                    "formation tracking is not part of this tracker", conflict=True
-                )
-            if not pipeline.config.formation.enabled:
-                raise CommandRefused(
-                    "formation tracking is switched off (configuration formation.enabled)",
-                    conflict=True,
-                )
+            tracker = _switched_on_peer(pipeline, "formation", FormationTracker)
             last = pipeline.last_time
             if last is None:
                 raise CommandRefused("members: no track exists before the first batch")

@@ -329,6 +329,8 @@ class ScaleOut:
             return
         margin = self.sector_margin
         now = time.monotonic()
+        # an offer older than the retry interval no longer holds a track back
+        self._offered = {k: v for k, v in self._offered.items() if now - v < OFFER_RETRY_S}
         leaving = []
         for track in state.report.get("tracks") or ():
             if track.get("kind") != "individual" or track.get("formation_id"):
@@ -336,13 +338,8 @@ class ScaleOut:
             x, y = track["position"]
             if not sector.beyond(x, y, margin):
                 continue
-            last = self._offered.get(track["id"])
-            if last is not None and now - last < OFFER_RETRY_S:
-                continue
-            leaving.append(track["id"])
-        if len(self._offered) > 4 * len(state.report.get("tracks") or ()) + 100:
-            live = {t["id"] for t in state.report.get("tracks") or ()}
-            self._offered = {k: v for k, v in self._offered.items() if k in live}
+            if track["id"] not in self._offered:
+                leaving.append(track["id"])
         if not leaving:
             return
         states = self.engine.point_states(leaving)
