@@ -53,6 +53,19 @@ def _annotation(hint: Any, meta: Any) -> Any:
         return Annotated[int, Strict(), Field(**bounds)]
     if hint is str:
         return Literal[choices] if choices else Annotated[str, Strict()]  # type: ignore[valid-type]
+    if get_origin(hint) is dict:  # name -> value (point_patterns.patterns)
+        key = Annotated[
+            str, Strict(), Field(min_length=1, max_length=meta.get("name_length", 64))
+        ]
+        value = _annotation(get_args(hint)[1], meta)
+        return Annotated[dict[key, value], Field(max_length=meta.get("max_items"))]  # type: ignore[valid-type]
+    if get_origin(hint) is tuple and get_args(hint)[-1] is not Ellipsis:  # fixed: (x, y)
+        args = get_args(hint)
+        items = _annotation(args[0], {})
+        return Annotated[
+            list[items],  # type: ignore[valid-type]
+            Field(min_length=len(args), max_length=len(args)),
+        ]
     if get_origin(hint) is tuple:
         item = _annotation(get_args(hint)[0], meta)
         fewest, most = meta.get("length", (0, None))
@@ -79,6 +92,9 @@ def section_model(cls: type) -> type[BaseModel]:
         if dataclasses.is_dataclass(hints[f.name]):
             fields[f.name] = (ann, Field(default_factory=ann, description=desc))
         else:
+            if f.default_factory is not dataclasses.MISSING:  # a mapping, empty by default
+                fields[f.name] = (ann, Field(default=f.default_factory(), description=desc))
+                continue
             default = f.default
             if isinstance(default, tuple):
                 default = list(default)
@@ -127,6 +143,9 @@ def _patch_model(model: type[BaseModel], name: str) -> type[BaseModel]:
         if isinstance(ann, type) and issubclass(ann, BaseModel):
             ann = _patch_model(ann, ann.__name__ + "Patch")
             typ: Any = ann | None
+        elif get_origin(ann) is dict:  # a mapping merges by name; a name's null removes it
+            key, value = get_args(ann)
+            typ = Annotated[dict[key, value | None] | None, *info.metadata]  # type: ignore[valid-type]
         else:
             typ = Annotated[ann | None, *info.metadata] if info.metadata else ann | None
         fields[fname] = (typ, Field(default=None, description=info.description))

@@ -54,6 +54,7 @@ from service.viewers import ViewerHub
 from trackers.config import TrackerConfig
 from trackers.extended.tracker import ExtendedTracker, snapshot_of
 from trackers.formation.tracker import FormationTracker
+from trackers.pattern.tracker import PatternTracker, pattern_snapshot
 from trackers.peers import PointTrackState
 from trackers.pipeline import MAX_ABS_POSITION, TrackingPipeline
 from trackers.state import StateError
@@ -450,6 +451,69 @@ class Engine:
             result = future.result()  # running now: its answer comes soon
         return result
 
+    def _start_time(self, pipeline: TrackingPipeline, at: float | None) -> float:
+        """When a track started by hand starts: the last processed batch's time, or ``at``
+        (not before it, nor more than ``ingest.max_time_jump`` after it; required before the
+        first batch). Raises :class:`CommandRefused`."""
+        last = pipeline.last_time
+        if last is None:
+            if at is None:
+                raise CommandRefused("time: required before the first batch is processed")
+            return float(at)
+        t = last if at is None else float(at)
+        if t < last:
+            raise CommandRefused(f"time: {t} is before the last processed batch's time {last}")
+        jump = self._applied_ingest.max_time_jump
+        if t > last + jump:
+            raise CommandRefused(
+                f"time: {t} is more than ingest.max_time_jump ({jump} s) after the "
+                f"last processed batch's time {last}"
+            )
+        return t
+
+    def start_pattern_track(
+        self,
+        pattern: str,
+        position: tuple[float, float],
+        velocity: tuple[float, float],
+        attitude: float,
+        *,
+        attitude_rate: float = 0.0,
+        position_std: float = 10.0,
+        velocity_std: float = 5.0,
+        attitude_std: float = 0.1,
+        at: float | None = None,
+        timeout: float = 5.0,
+    ) -> dict[str, Any]:
+        """Start a confirmed point-pattern track by hand (:meth:`PatternTracker.start`) on the
+        worker, at the time :meth:`_start_time` gives. Returns the new Track; the latest report
+        lists it at once. Raises :class:`CommandRefused` (nothing changed) for an unknown
+        pattern or unusable values, or when point-pattern tracking is switched off, and
+        :class:`EngineUnavailable` as :meth:`call_in_worker`."""
+        pos, vel, _ = _extended_prior(position, velocity, np.eye(2))
+
+        def command(pipeline: TrackingPipeline) -> dict[str, Any]:
+            tracker = _switched_on_peer(pipeline, "point_patterns", PatternTracker)
+            t = self._start_time(pipeline, at)
+            try:
+                track = tracker.start(
+                    t,
+                    pattern,
+                    pos,
+                    vel,
+                    attitude,
+                    attitude_rate=attitude_rate,
+                    position_std=position_std,
+                    velocity_std=velocity_std,
+                    attitude_std=attitude_std,
+                )
+            except ValueError as exc:
+                raise CommandRefused(str(exc)) from None
+            self._refresh_state(t)
+            return track_to_dict(pattern_snapshot(track))
+
+        return self.call_in_worker(command, timeout)
+
     def start_extended_track(
         self,
         position: tuple[float, float],
@@ -473,23 +537,7 @@ class Engine:
 
         def command(pipeline: TrackingPipeline) -> dict[str, Any]:
             tracker = _switched_on_peer(pipeline, "extended", ExtendedTracker)
-            last = pipeline.last_time
-            if last is None:
-                if at is None:
-                    raise CommandRefused("time: required before the first batch is processed")
-                t = float(at)
-            else:
-                t = last if at is None else float(at)
-                if t < last:
-                    raise CommandRefused(
-                        f"time: {t} is before the last processed batch's time {last}"
-                    )
-                jump = self._applied_ingest.max_time_jump
-                if t > last + jump:
-                    raise CommandRefused(
-                        f"time: {t} is more than ingest.max_time_jump ({jump} s) after the "
-                        f"last processed batch's time {last}"
-                    )
+            t = self._start_time(pipeline, at)
             try:
                 track = tracker.start(
                     t,

@@ -54,6 +54,7 @@ __all__ = [
     "FormationIn",
     "IngestAcceptedOut",
     "IngestConfig",
+    "PatternTrackIn",
     "ProcessingTimesOut",
     "StatsOut",
     "TrackOut",
@@ -61,6 +62,7 @@ __all__ = [
     "decode_batch",
     "decode_extended_track",
     "decode_formation",
+    "decode_pattern_track",
     "format_validation_error",
     "valid_sensor_id",
 ]
@@ -474,6 +476,72 @@ def decode_extended_track(payload: bytes | str) -> ExtendedTrackIn:
             loc = tuple(err["loc"])
             if len(loc) > 2 and loc[0] == "extent" and loc[1] in ("matrix", "axes"):
                 err["loc"] = (loc[0], *loc[2:])
+        raise ValueError(format_validation_error(exc, errors)) from None
+
+
+# -- starting a point-pattern track by hand (POST /api/v1/tracks/pattern) -------------------
+
+
+class PatternTrackIn(BaseModel):
+    """A confirmed point-pattern track to start by hand: the pattern it shows, where its frame's
+    origin is, how it moves and its attitude."""
+
+    model_config = ConfigDict(
+        extra="forbid",
+        frozen=True,
+        json_schema_extra={
+            "examples": [
+                {
+                    "pattern": "frigate",
+                    "position": [1200.0, -350.0],
+                    "velocity": [8.0, 2.0],
+                    "attitude": 0.3,
+                }
+            ]
+        },
+    )
+
+    pattern: Annotated[str, Strict(), Field(min_length=1, max_length=64)] = Field(
+        description="the name of a pattern of the configuration's `point_patterns.patterns`"
+    )
+    position: tuple[Position, Position] = Field(
+        description="[x, y] of the target frame's origin, m"
+    )
+    velocity: tuple[Speed, Speed] = Field(default=(0.0, 0.0), description="[vx, vy], m/s")
+    attitude: Annotated[Finite, Field(ge=-2 * math.pi, le=2 * math.pi)] = Field(
+        default=0.0,
+        description="angle of the target frame's x axis from the global x axis, rad",
+    )
+    attitude_rate: Annotated[Finite, Field(ge=-10.0, le=10.0)] = Field(
+        default=0.0, description="rate of change of the attitude, rad/s"
+    )
+    position_std: Annotated[Finite, Field(gt=0.0, le=1e6)] = Field(
+        default=10.0, description="standard deviation of the position per axis, m"
+    )
+    velocity_std: Annotated[Finite, Field(gt=0.0, le=1e4)] = Field(
+        default=5.0, description="standard deviation of the velocity per axis, m/s"
+    )
+    attitude_std: Annotated[Finite, Field(gt=0.0, le=10.0)] = Field(
+        default=0.1, description="standard deviation of the attitude, rad"
+    )
+    time: Time | None = Field(
+        default=None,
+        description=(
+            "when the track starts, s: by default the last processed batch's time; required "
+            "before the first batch; never before the last processed batch"
+        ),
+    )
+
+
+def decode_pattern_track(payload: bytes | str) -> PatternTrackIn:
+    """Parse and validate a request to start a point-pattern track; raise ``ValueError`` whose
+    message names the field."""
+    try:
+        return PatternTrackIn.model_validate_json(payload)
+    except ValidationError as exc:
+        errors = exc.errors(include_url=False, include_input=False)
+        if errors and errors[0]["type"] == "model_type" and not errors[0]["loc"]:
+            raise ValueError("the body must be a JSON object") from None
         raise ValueError(format_validation_error(exc, errors)) from None
 
 

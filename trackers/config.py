@@ -22,6 +22,8 @@ __all__ = [
     "InitiationConfig",
     "MeasurementConfig",
     "MotionConfig",
+    "POINT_PATTERN_FILTERS",
+    "PointPatternConfig",
     "TrackManagementConfig",
     "TrackerConfig",
 ]
@@ -413,6 +415,153 @@ class FormationConfig:
         """γ with P(χ²₂ ≤ γ) = P_G: γ = −2 ln(1 − P_G)."""
         return -2.0 * math.log1p(-self.gate_probability)
 
+#: The multiple-model filters of point-pattern tracks (``point_patterns.filter``).
+POINT_PATTERN_FILTERS = ("lmm", "imm")
+#: Most reference patterns, most points in one, longest name, largest |coordinate| (m).
+MAX_PATTERNS = 32
+MAX_PATTERN_POINTS = 64
+MAX_PATTERN_NAME = 64
+MAX_PATTERN_COORDINATE = 1e4
+
+
+def _check_patterns(patterns: Any) -> dict[str, tuple[tuple[float, float], ...]]:
+    """The patterns as ``{name: ((x, y), ...)}`` with float coordinates; ``ValueError`` naming
+    ``point_patterns.patterns.<name>`` for a name or a point set the tracker cannot use: at
+    least 3 and at most :data:`MAX_PATTERN_POINTS` points, finite coordinates within
+    ±:data:`MAX_PATTERN_COORDINATE` m, no two points closer than 1 mm, not all on one line."""
+    where = "point_patterns.patterns"
+    if not isinstance(patterns, dict):
+        raise ValueError(f"{where}: expected an object of name -> points, got {patterns!r}")
+    if len(patterns) > MAX_PATTERNS:
+        raise ValueError(f"{where}: at most {MAX_PATTERNS} patterns, got {len(patterns)}")
+    out: dict[str, tuple[tuple[float, float], ...]] = {}
+    for name, points in patterns.items():
+        if not isinstance(name, str) or not (0 < len(name) <= MAX_PATTERN_NAME):
+            raise ValueError(f"{where}: a name must be 1 to {MAX_PATTERN_NAME} characters")
+        at = f"{where}.{name}"
+        if not isinstance(points, list | tuple) or not (
+            3 <= len(points) <= MAX_PATTERN_POINTS
+        ):
+            raise ValueError(f"{at}: expected 3 to {MAX_PATTERN_POINTS} points [[x, y], ...]")
+        pts: list[tuple[float, float]] = []
+        for i, p in enumerate(points):
+            ok = isinstance(p, list | tuple) and len(p) == 2
+            ok = ok and all(
+                isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v)
+                for v in p
+            )
+            if not ok or max(abs(float(v)) for v in p) > MAX_PATTERN_COORDINATE:
+                raise ValueError(
+                    f"{at}[{i}]: expected [x, y], finite numbers within "
+                    f"±{MAX_PATTERN_COORDINATE:g} m, got {p!r}"
+                )
+            pts.append((float(p[0]), float(p[1])))
+        for i in range(len(pts)):
+            for j in range(i):
+                if math.dist(pts[i], pts[j]) < 1e-3:
+                    raise ValueError(f"{at}: points {j} and {i} coincide")
+        (x0, y0), (x1, y1) = pts[0], max(pts, key=lambda q: math.dist(q, pts[0]))
+        span = math.dist((x0, y0), (x1, y1))
+        off = max(abs((x1 - x0) * (y - y0) - (y1 - y0) * (x - x0)) / span for x, y in pts)
+        if off < 1e-3:
+            raise ValueError(f"{at}: the points are all on one line (no attitude to see)")
+        out[name] = tuple(pts)
+    return out
+
+
+@dataclass(frozen=True)
+class PointPatternConfig:
+    """Bending extended targets with known point patterns (papers 000 and 001,
+    :mod:`trackers.pattern`).
+
+    ``patterns`` maps a reference pattern's name to its points ``[[x, y], ...]`` (m, in the
+    target's own frame; at least 3). Each scan the detections near a track are matched to every
+    pattern by the fast point-pattern matcher (rotation, translation and a scale within
+    ``1 ± scale_tolerance``), and the track's state ``[x, vx, y, vy, α, α̇]`` (α the attitude:
+    pattern point ``p`` is seen at ``(x, y) + R(α) p``) is estimated by a multiple-model filter
+    over principal modes (constant velocity, acceleration noise ``accel_std_cv``; coordinated
+    turns at ``±turn_rate``, ``accel_std_ct``), proper modes (constant attitude; constant
+    attitude rate; ``attitude_accel_std``) and shape modes (one per pattern): the layered
+    MM (``filter`` ``"lmm"``, one bank per layer, ``lmm_iterations`` of eq. 12) or the full
+    IMM over every combination (``"imm"``). A pattern matched with at least ``min_matched``
+    points in ``birth_scans`` scans in a row, moving no faster than ``max_speed`` (from the
+    third scan on, where the first two lead: the same velocity and attitude rate within the
+    noise and 2 g), starts a confirmed track; its detections start and update no individual track. A track is deleted
+    after ``max_coast_time`` without a match, or when its score falls
+    ``track_management.delete_drop_from_peak`` below its peak. No pattern, no cost.
+    """
+
+    enabled: bool = _field(True, "track targets that show a configured point pattern")
+    patterns: dict[str, tuple[tuple[float, float], ...]] = field(
+        default_factory=dict,
+        metadata={
+            "description": (
+                "reference patterns: name -> [[x, y], ...] in metres in the target's frame "
+                "(at least 3 points)"
+            ),
+            "length": (3, MAX_PATTERN_POINTS),
+            "max_items": MAX_PATTERNS,
+            "name_length": MAX_PATTERN_NAME,
+        },
+    )
+    filter: str = _field(
+        "lmm",
+        'the multiple-model filter: "lmm" (layered MM, paper 001) or "imm" (full IMM, paper 000)',
+        choices=POINT_PATTERN_FILTERS,
+    )
+    lmm_iterations: int = _field(
+        0, "iterations of the layered MM's coupling (eq. 12; 0: eqs. 7 and 10 once)", ge=0, le=10
+    )
+    turn_rate: float = _field(
+        3.0, "turn rate of the coordinated-turn modes (one each way), deg/s", gt=0, le=90.0
+    )
+    accel_std_cv: float = _field(
+        0.5, "acceleration noise std of the constant-velocity mode, m/s² per axis", gt=0, le=1e3
+    )
+    accel_std_ct: float = _field(
+        0.5, "acceleration noise std of the coordinated-turn modes, m/s² per axis", gt=0, le=1e3
+    )
+    attitude_accel_std: float = _field(
+        0.05, "attitude acceleration noise std of the proper modes, rad/s²", gt=0, le=100.0
+    )
+    stay_probability: float = _field(
+        0.95, "probability that a layer's mode stays the same from one scan to the next", gt=0, lt=1
+    )
+    scale_tolerance: float = _field(
+        0.1, "matched patterns may be this much larger or smaller (relative)", gt=0, lt=1
+    )
+    min_matched: int = _field(
+        3, "fewest matched points of a pattern that start a track", ge=3, le=MAX_PATTERN_POINTS
+    )
+    birth_scans: int = _field(
+        3, "scans in a row a pattern must be matched to start a track", ge=2, le=100
+    )
+    max_speed: float = _field(
+        700.0, "fastest target a start follows between matches, m/s", gt=0, le=1e5
+    )
+    max_coast_time: float = _field(
+        10.0, "a track is deleted after this long without a match, s", gt=0, le=1e6
+    )
+
+    def __post_init__(self) -> None:
+        _check_bounds(self, "point_patterns")
+        if self.filter not in POINT_PATTERN_FILTERS:
+            raise ValueError(
+                f"point_patterns.filter: one of {list(POINT_PATTERN_FILTERS)}, got {self.filter!r}"
+            )
+        object.__setattr__(self, "patterns", _check_patterns(self.patterns))
+        for name, pts in self.patterns.items():
+            if len(pts) < self.min_matched:
+                raise ValueError(
+                    f"point_patterns.patterns.{name}: {len(pts)} points, fewer than "
+                    f"point_patterns.min_matched ({self.min_matched})"
+                )
+
+    @property
+    def turn_rate_rad(self) -> float:
+        """The coordinated-turn modes' rate, rad/s."""
+        return math.radians(self.turn_rate)
+
 
 @dataclass(frozen=True)
 class TrackerConfig:
@@ -426,6 +575,7 @@ class TrackerConfig:
     track_management: TrackManagementConfig = field(default_factory=TrackManagementConfig)
     extended: ExtendedConfig = field(default_factory=ExtendedConfig)
     formation: FormationConfig = field(default_factory=FormationConfig)
+    point_patterns: PointPatternConfig = field(default_factory=PointPatternConfig)
 
     def to_dict(self) -> dict[str, Any]:
         """Nested plain dicts and lists, JSON-ready."""
@@ -495,8 +645,17 @@ def _typed(hint: Any, value: Any, path: str) -> Any:
     if get_origin(hint) is tuple:
         if not isinstance(value, list | tuple):
             raise ValueError(f"{path}: expected a list, got {value!r}")
-        item = get_args(hint)[0]
-        return tuple(_typed(item, v, f"{path}[{i}]") for i, v in enumerate(value))
+        args = get_args(hint)
+        if len(args) != 2 or args[1] is not Ellipsis:  # fixed length: (float, float)
+            if len(value) != len(args):
+                raise ValueError(f"{path}: expected {len(args)} items, got {value!r}")
+            return tuple(_typed(a, v, f"{path}[{i}]") for i, (a, v) in enumerate(zip(args, value, strict=True)))
+        return tuple(_typed(args[0], v, f"{path}[{i}]") for i, v in enumerate(value))
+    if get_origin(hint) is dict:
+        if not isinstance(value, dict):
+            raise ValueError(f"{path}: expected an object, got {value!r}")
+        key, item = get_args(hint)
+        return {_typed(key, k, path): _typed(item, v, f"{path}.{k}") for k, v in value.items()}
     raise TypeError(f"{path}: unsupported field type {hint!r}")
 
 

@@ -24,6 +24,7 @@ from trackers.config import TrackerConfig
 from trackers.extended.tracker import ExtendedTracker
 from trackers.formation.tracker import FormationTracker
 from trackers.individual import IndividualTracker
+from trackers.pattern.tracker import PatternTracker
 from trackers.peers import (
     PeerError,
     PeerProposal,
@@ -73,11 +74,13 @@ def make_point_tracker(config: TrackerConfig, *, id_prefix: str = "") -> PointTr
 
 
 def standard_peers(config: TrackerConfig, *, id_prefix: str = "") -> tuple[PeerTracker, ...]:
-    """One of each peer kind, in the order they see a scan: extended objects and groups
-    (:mod:`trackers.extended`), then formations (:mod:`trackers.formation`), which see
-    neither the detections nor the tracks the extended tracker took: a convoy of unresolved
-    returns is never a formation."""
+    """One of each peer kind, in the order they see a scan: targets showing a configured
+    point pattern (:mod:`trackers.pattern`; nothing without patterns), whose detections no
+    other peer sees, then extended objects and groups (:mod:`trackers.extended`), then
+    formations (:mod:`trackers.formation`), which see neither the detections nor the tracks
+    the extended tracker took: a convoy of unresolved returns is never a formation."""
     return (
+        PatternTracker(config, id_prefix=id_prefix),
         ExtendedTracker(config, id_prefix=id_prefix),
         FormationTracker(config, id_prefix=id_prefix),
     )

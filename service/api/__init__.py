@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from fastapi import APIRouter
 
-from service.api import config, detections, extended, formation, health, tracks
+from service.api import config, detections, extended, formation, health, patterns, tracks
 
 __all__ = ["api_router"]
 
@@ -12,6 +12,7 @@ api_router = APIRouter()
 api_router.include_router(health.router)
 api_router.include_router(extended.router, prefix="/api/v1")  # before /tracks/{track_id}
 api_router.include_router(formation.router, prefix="/api/v1")  # before /tracks/{track_id}
+api_router.include_router(patterns.router, prefix="/api/v1")  # before /tracks/{track_id}
 api_router.include_router(tracks.router, prefix="/api/v1")
 api_router.include_router(detections.router, prefix="/api/v1")
 api_router.include_router(config.router, prefix="/api/v1")

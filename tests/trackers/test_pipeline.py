@@ -322,7 +322,7 @@ def test_new_ids_carry_the_instance_prefix():
     p = TrackingPipeline.all_kinds(SINGLE_POINT, id_prefix="west:")
     p.process(scan_at(0.0, [[0.0, 0.0]]))
     assert [s.id for s in p.snapshot()] == ["west:T1"]
-    assert p.peers[0].id_prefix == p.peers[1].id_prefix == "west:"
+    assert {peer.id_prefix for peer in p.peers} == {"west:"}
 
 
 def test_a_handed_track_is_predicted_to_the_scan_and_updated_under_its_id():

@@ -68,7 +68,7 @@ def test_nothing_is_born_from_uniform_clutter_or_when_disabled():
 def test_a_track_started_by_hand_is_confirmed_and_takes_its_detections():
     rng = np.random.default_rng(9)
     p = TrackingPipeline.all_kinds()
-    peer = p.peers[0]
+    peer = next(q for q in p.peers if q.kind == "extended")
     assert isinstance(peer, ExtendedTracker)
     p.process(_cluster_scan(0, rng, np.array([0.0, 0.0]), n=0, clutter=10))
     track = peer.start(0.0, [0.0, 0.0], [10.0, 0.0], np.diag([150.0**2, 15.0**2]))
