@@ -23,6 +23,7 @@
     trails: new Map(), // id -> [[x, y], ...]
     selected: null, // id of the clicked track
     frames: 0,
+    patterns: {}, // point_patterns.patterns of the configuration: name -> [[x, y], ...]
   };
 
   // screen = (offsetX + x * scale, offsetY - y * scale), in CSS pixels
@@ -143,6 +144,27 @@
     return u * u + v * v <= 1;
   }
 
+  // a point-pattern track: its likeliest pattern's points at the track's attitude
+  // (point p is seen at position + R(attitude) p), joined in order
+  function drawPattern(t, style) {
+    const shapes = t.shape_probabilities;
+    if (!shapes || !Number.isFinite(t.attitude)) return;
+    let best = null;
+    for (const name of Object.keys(shapes)) if (best === null || shapes[name] > shapes[best]) best = name;
+    const points = model.patterns[best];
+    if (!Array.isArray(points)) return;
+    const c = Math.cos(t.attitude);
+    const s = Math.sin(t.attitude);
+    const at = points.map(([px, py]) =>
+      toScreen(t.position[0] + c * px - s * py, t.position[1] + s * px + c * py));
+    ctx.strokeStyle = style.color;
+    ctx.beginPath();
+    at.forEach(([sx, sy], i) => (i ? ctx.lineTo(sx, sy) : ctx.moveTo(sx, sy)));
+    ctx.closePath();
+    ctx.stroke();
+    for (const [sx, sy] of at) ctx.strokeRect(sx - 3, sy - 3, 6, 6);
+  }
+
   // an extended object or group: its extent ellipse (outline, faint fill), the centroid with
   // its id and velocity vector, and a short trail of the centroid
   function drawExtended(t, style) {
@@ -161,6 +183,7 @@
     ctx.lineWidth = style.selected ? 2.5 : 1.5;
     ctx.stroke();
     ctx.lineWidth = 1.5;
+    drawPattern(t, style);
     drawVelocity(t, e.sx, e.sy, style.color);
     ctx.fillStyle = style.color;
     ctx.beginPath();
@@ -473,6 +496,19 @@
     showDetails();
     requestRender();
   }
+
+  // the reference patterns, for drawing point-pattern tracks: read at start and every 15 s
+  function loadPatterns() {
+    fetch("/api/v1/config")
+      .then((r) => (r.ok ? r.json() : null))
+      .then((doc) => {
+        const p = doc && doc.point_patterns && doc.point_patterns.patterns;
+        if (p && typeof p === "object") model.patterns = p;
+      })
+      .catch(() => {});
+  }
+  loadPatterns();
+  setInterval(loadPatterns, 15000);
 
   function connect() {
     const status = el("status");
