@@ -851,7 +851,7 @@ def _exchange(
     filter: the output with its own proper part. Shape filter: the output's parts of the
     multi-mode dynamic layers. A part whose layer has a single mode is kept: it is already
     conditioned on that layer's (only) model, as in the IMM."""
-    r_g, r_p, r_s = sizes
+    r_g, r_p, _ = sizes
     K = x0.shape[0]
     multi_g, multi_p = r_g > 1, r_p > 1
     if not (multi_g or multi_p):

@@ -312,5 +312,5 @@ def test_exchange_keeps_the_own_part_and_gives_the_other_layers_marginal():
         cond_new = Pn[k, :4, :4] - Pn[k, :4, 4:] @ np.linalg.solve(Pn[k, 4:, 4:], Pn[k, 4:, :4])
         np.testing.assert_allclose(cond_new, cond_old, atol=1e-9)
     # the same marginal in, the same joint out
-    xs, Ps = _replace_proper_part(x, P, x[:, 4:], P[:, 4:, 4:])
+    _, Ps = _replace_proper_part(x, P, x[:, 4:], P[:, 4:, 4:])
     np.testing.assert_allclose(Ps, P, atol=1e-12)
