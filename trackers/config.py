@@ -15,6 +15,7 @@ from typing import Any, get_args, get_origin, get_type_hints
 __all__ = [
     "ASSOCIATION_METHODS",
     "INITIATION_METHODS",
+    "POINT_PATTERN_FILTERS",
     "AssociationConfig",
     "ExtendedConfig",
     "FormationConfig",
@@ -22,7 +23,6 @@ __all__ = [
     "InitiationConfig",
     "MeasurementConfig",
     "MotionConfig",
-    "POINT_PATTERN_FILTERS",
     "PointPatternConfig",
     "TrackManagementConfig",
     "TrackerConfig",
@@ -415,6 +415,7 @@ class FormationConfig:
         """γ with P(χ²₂ ≤ γ) = P_G: γ = −2 ln(1 − P_G)."""
         return -2.0 * math.log1p(-self.gate_probability)
 
+
 #: The multiple-model filters of point-pattern tracks (``point_patterns.filter``).
 POINT_PATTERN_FILTERS = ("lmm", "imm")
 #: Most reference patterns, most points in one, longest name, largest |coordinate| (m).
@@ -439,9 +440,7 @@ def _check_patterns(patterns: Any) -> dict[str, tuple[tuple[float, float], ...]]
         if not isinstance(name, str) or not (0 < len(name) <= MAX_PATTERN_NAME):
             raise ValueError(f"{where}: a name must be 1 to {MAX_PATTERN_NAME} characters")
         at = f"{where}.{name}"
-        if not isinstance(points, list | tuple) or not (
-            3 <= len(points) <= MAX_PATTERN_POINTS
-        ):
+        if not isinstance(points, list | tuple) or not (3 <= len(points) <= MAX_PATTERN_POINTS):
             raise ValueError(f"{at}: expected 3 to {MAX_PATTERN_POINTS} points [[x, y], ...]")
         pts: list[tuple[float, float]] = []
         for i, p in enumerate(points):
@@ -486,8 +485,8 @@ class PointPatternConfig:
     IMM over every combination (``"imm"``). A pattern matched with at least ``min_matched``
     points in ``birth_scans`` scans in a row, moving no faster than ``max_speed`` (from the
     third scan on, where the first two lead: the same velocity and attitude rate within the
-    noise and 2 g), starts a confirmed track; its detections start and update no individual track. A track is deleted
-    after ``max_coast_time`` without a match, or when its score falls
+    noise and 2 g), starts a confirmed track; its detections start and update no individual
+    track. A track is deleted after ``max_coast_time`` without a match, or when its score falls
     ``track_management.delete_drop_from_peak`` below its peak. No pattern, no cost.
     """
 
@@ -649,7 +648,10 @@ def _typed(hint: Any, value: Any, path: str) -> Any:
         if len(args) != 2 or args[1] is not Ellipsis:  # fixed length: (float, float)
             if len(value) != len(args):
                 raise ValueError(f"{path}: expected {len(args)} items, got {value!r}")
-            return tuple(_typed(a, v, f"{path}[{i}]") for i, (a, v) in enumerate(zip(args, value, strict=True)))
+            return tuple(
+                _typed(a, v, f"{path}[{i}]")
+                for i, (a, v) in enumerate(zip(args, value, strict=True))
+            )
         return tuple(_typed(args[0], v, f"{path}[{i}]") for i, v in enumerate(value))
     if get_origin(hint) is dict:
         if not isinstance(value, dict):

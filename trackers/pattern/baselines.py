@@ -115,7 +115,7 @@ def match_vote(
     else:
         lo_s = float(ls[finite].min()) if finite.any() else 0.0
         hi_s = float(ls[finite].max()) if finite.any() else 0.0
-    n_s = int(math.floor((hi_s - lo_s) / step)) + 2
+    n_s = math.floor((hi_s - lo_s) / step) + 2
     bs = np.floor((np.where(finite, ls, lo_s) - lo_s) / step).astype(np.int64)
     bt = np.floor((th + math.pi) / step).astype(np.int64) % n_t
     anchor = i_[:, None] * n + j_[None, :]  # (i, j)
@@ -164,8 +164,10 @@ def match_vote(
             match = pattern_match(P, Q, np.array(pairs))
         except ValueError:
             continue
-        if best is None or match.support > best.support or (
-            match.support == best.support and match.mse < best.mse
+        if (
+            best is None
+            or match.support > best.support
+            or (match.support == best.support and match.mse < best.mse)
         ):
             best = match
     return best
@@ -185,8 +187,8 @@ def _inlier_pairs(Pc: np.ndarray, Qc: np.ndarray, a: complex, T: complex, r2: fl
     """One-to-one inliers of ``y = a x + T``: the Hungarian assignment of pattern points to
     detections on ``‖y − ŷ‖²``, pairs farther than ``r2`` (squared radius) left out."""
     E = Qc[None, :] - (a * Pc + T)[:, None]
-    D = E.real**2 + E.imag**2
-    cost = np.where(D <= r2, D, _FAR)
+    d2 = E.real**2 + E.imag**2
+    cost = np.where(d2 <= r2, d2, _FAR)
     m = Pc.shape[0]
     # a dummy column per pattern point at the radius: leaving it unmatched costs r2
     dummy = np.full((m, m), _FAR)

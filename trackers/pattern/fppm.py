@@ -46,17 +46,21 @@ noise-free match; the stated false-rejection rate ``α`` then holds exactly.
 - CMPSF for anchor ``(i, j)``, vectorized over all ``j`` of the row and all candidate pairs:
   the paper grows clusters by visiting the candidate pairs in an arbitrary order, so its
   result depends on that order. Here every candidate pair ``(h, k)`` *seeds* a cluster
-  ``{(i, j), (h, k)}`` and collects, for each pattern point ``h' > h``, the nearest detection
-  ``k'`` that passes the case-2 test against that two-pair cluster (``N = 2``,
-  ``1 + 1/N + … = 3/2 + 2 |u_{h'} − u_h/2|² / |u_h|²``). The seed giving the largest
-  cluster is the smallest-index member of the matching, so no order is arbitrary.
-- The best clusters are then grown as the paper's do, with the estimate updated: refit the
-  similarity on the cluster (GLSE), re-test every pattern point (a non-member against the
-  cluster as above; a member against the cluster without it, the leave-one-out form
-  ``|y − ŷ₍ₕ₎|² (1 − ℓ_h) / σ²``, ``ℓ_h = 1/p + |x_h − x̄|²/Sₓₓ``), keep each pattern point's
-  nearest passing detection, one-to-one (a detection claimed twice goes to the smaller
-  ``ε``), until the cluster no longer changes. The support ``w`` is the grown cluster's
-  size minus one; ties go to the smallest MSE (eq. 16), as section 4.3.3 asks.
+  ``{(i, j), (h, k)}`` and is scored, for each pattern point ``h' > h``, by the nearest
+  detection ``k'`` under the case-2 test against that two-pair cluster (``N = 2``:
+  ``1 + 1/N + … = 3/2 + 2 |u_{h'} − u_h/2|² / |u_h|²``): its count of passing ``h'`` (the
+  paper's support of the cluster) and its MSAC cost ``Σ_{h'} min(ε, γ)``. The seed of a
+  matching's full cluster is its second-smallest pattern index.
+- The :data:`MAX_GROWN` seeds of smallest cost among those whose count can reach the best
+  support so far are then grown as the paper's clusters grow, with the estimate updated:
+  refit the similarity (GLSE), test every pattern point outside the cluster with every
+  unused detection, add the pair of smallest ``ε`` if it passes, repeat. Each pair is tested
+  once, against the cluster before it joined (the paper's test; re-testing members would
+  reject true pairs a second time). The support ``w`` is the grown cluster's size minus one;
+  ties go to the smallest MSE (eq. 16), as section 4.3.3 asks.
+- Greedy growth can swap two detections; the winner is re-associated once (Hungarian, same
+  test against the whole matching) and the result kept if it has more pairs or a smaller
+  MSE. (The paper's FPPM ends with the best conditional matching as is.)
 - ``scale_range``: seeds whose scale ``|v_k| / |u_h|`` is outside the range by more than the
   test's noise allowance, and grown clusters whose fitted ``s`` is outside it, support nothing.
 """
@@ -68,6 +72,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.optimize import linear_sum_assignment
 
 from trackers.pattern.registration import Similarity, fit_similarity
 
@@ -205,6 +210,14 @@ def _complex(a: np.ndarray) -> np.ndarray:
     return a[:, 0] + 1j * a[:, 1]
 
 
+@functools.lru_cache(maxsize=64)
+def _off_diagonal(n: int) -> np.ndarray:
+    """``(n, n)`` boolean, ``True`` off the diagonal (read-only)."""
+    out = ~np.eye(n, dtype=bool)
+    out.setflags(write=False)
+    return out
+
+
 @functools.lru_cache(maxsize=256)
 def _seed_pairs(r: int, w_min: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Seed ``h`` and candidate ``h' > h`` of each pair (indices among the ``r`` pattern points
@@ -239,14 +252,17 @@ def _row_seeds(
     m, n = Pc.shape[0], V.shape[0]
     U = Pc[i + 1 :] - Pc[i]  # u_h, h > i
     r = U.shape[0]
-    ph, ph2, starts, seeds_h = _seed_pairs(r, w_min)
+    need = max(w_min, w_floor)  # the support worth growing: ties with the best so far
+    ph, ph2, starts, seeds_h = _seed_pairs(r, need)
+    if ph.shape[0] == 0:
+        return np.empty((0, m), dtype=np.intp)
     Uh, Uh2 = U[ph], U[ph2]
     ratio = (Uh2 / Uh).astype(np.complex64)  # predicted v_{k'} = v_k · u_{h'} / u_h
     d = Uh2 - 0.5 * Uh
     lev = 1.5 + 2.0 * (d.real**2 + d.imag**2) / (Uh.real**2 + Uh.imag**2)
     thr = (gamma * sigma2 * lev).astype(np.float32)  # ε ≤ γ ⇔ |v_{k'} − â u_{h'}|² ≤ thr
     # pairs (h, k) that may match given the anchor (i, j): k ≠ j, flags, scale
-    valid = np.broadcast_to(~np.eye(n, dtype=bool)[:, None, :], (n, r, n))
+    valid = np.broadcast_to(_off_diagonal(n)[:, None, :], (n, r, n))
     if scale_range is not None:
         absU = np.abs(U)
         slack = math.sqrt(gamma * 2.0 * sigma2)
@@ -264,20 +280,21 @@ def _row_seeds(
     pad = np.arange(L)[None, None, :] >= cnt[:, :, None]
     Vs = np.take_along_axis(V, idx.reshape(n, r * L), axis=1).reshape(n, r, L)
     Vs = np.where(pad, _FAR32, Vs).astype(np.complex64)
-    pred = Vs[:, ph, :] * ratio[None, :, None]  # (j, c, l)
+    pred = Vs[:, ph, :] * ratio[None, :, None]  # (j, c, l): seeds' predictions
     E = Vs[:, ph2, None, :] - pred[:, :, :, None]  # (j, c, l, l')
     D = E.real * E.real
     D += E.imag * E.imag
-    best = D.argmin(axis=3)
-    dmin = np.take_along_axis(D, best[..., None], axis=3)[..., 0]
-    # the nearest candidate must not be the seed's own detection
-    same = np.take_along_axis(idx[:, ph2, :], best, axis=2) == idx[:, ph, :]
+    dmin = D.min(axis=3)
+    # the seed's own detection k is among the candidates of h', at |v_k|² |1 − u_{h'}/u_h|²;
+    # when that is in the gate and is the nearest, it is no hit (k' ≠ k)
+    own = np.abs(ratio - 1.0) ** 2
+    Vh = Vs[:, ph, :]
+    own_d = (Vh.real * Vh.real + Vh.imag * Vh.imag) * own[None, :, None]
     eps = dmin * (gamma / thr)[None, :, None]
-    hit = (eps <= gamma) & ~same
+    hit = (eps <= gamma) & ~((own_d <= thr[None, :, None]) & (dmin >= own_d * (1.0 - 1e-4)))
     cost = np.minimum(eps, gamma)
     count = np.add.reduceat(hit.astype(np.int32), starts, axis=1) + 1  # (j, H, l): w
     count *= ~pad[:, seeds_h, :]
-    need = max(w_min, w_floor)
     flat = count.reshape(-1)
     sel = np.flatnonzero(flat >= need)
     if sel.shape[0] == 0:
@@ -294,6 +311,20 @@ def _row_seeds(
     return asg
 
 
+def _pair_terms(Pc: np.ndarray, Qc: np.ndarray) -> np.ndarray:
+    """Per pair ``(h, k)``, row ``h n + k``: ``[1, x, |x|², y, x* y, |y|²]`` (complex), the
+    terms whose sums over a cluster give its least-squares similarity."""
+    m, n = Pc.shape[0], Qc.shape[0]
+    terms = np.empty((m, n, 6), dtype=complex)
+    terms[..., 0] = 1.0
+    terms[..., 1] = Pc[:, None]
+    terms[..., 2] = (Pc.real**2 + Pc.imag**2)[:, None]
+    terms[..., 3] = Qc[None, :]
+    terms[..., 4] = np.conj(Pc)[:, None] * Qc[None, :]
+    terms[..., 5] = (Qc.real**2 + Qc.imag**2)[None, :]
+    return terms.reshape(m * n, 6)
+
+
 def _grow(
     Pc: np.ndarray,
     Qc: np.ndarray,
@@ -302,6 +333,7 @@ def _grow(
     gamma: float,
     scale_range: tuple[float, float] | None,
     mflag: np.ndarray | None,
+    terms: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Grow the ``(K, m)`` seed clusters ``asg`` (detection index or −1; two pairs each) as
     the paper's clusters grow, one pair at a time with the estimate updated: refit the
@@ -321,21 +353,12 @@ def _grow(
     n = Qc.shape[0]
     asg = asg.copy()
     rows = np.arange(K)
-    # per pair (h, k): [1, x, |x|², y, x* y, |y|²] (complex), summed over a cluster
-    P2 = Pc.real**2 + Pc.imag**2
-    Q2 = Qc.real**2 + Qc.imag**2
-    terms = np.empty((m, n, 6), dtype=complex)
-    terms[..., 0] = 1.0
-    terms[..., 1] = Pc[:, None]
-    terms[..., 2] = P2[:, None]
-    terms[..., 3] = Qc[None, :]
-    terms[..., 4] = np.conj(Pc)[:, None] * Qc[None, :]
-    terms[..., 5] = Q2[None, :]
-    terms = terms.reshape(m * n, 6)
+    if terms is None:
+        terms = _pair_terms(Pc, Qc)
     member = asg >= 0
     r_, h_ = np.nonzero(member)
-    stats = np.zeros((K, 6), dtype=complex)
-    np.add.at(stats, r_, np.take(terms, h_ * n + asg[r_, h_], axis=0))
+    flat_idx = np.arange(m) * n + np.maximum(asg, 0)
+    stats = np.einsum("khc,kh->kc", np.take(terms, flat_idx, axis=0), member.astype(complex))
     block = np.zeros((K, m, n))
     block[member] = _FAR  # members are not candidates …
     block[r_, :, asg[r_, h_]] = _FAR  # … nor are their detections
@@ -346,7 +369,13 @@ def _grow(
     lev0 = np.empty((K, m))
     active = np.ones(K, dtype=bool)
     for _ in range(m - 2):
-        p, sx, sxx, sy, sxy = stats[:, 0].real, stats[:, 1], stats[:, 2].real, stats[:, 3], stats[:, 4]
+        p, sx, sxx, sy, sxy = (
+            stats[:, 0].real,
+            stats[:, 1],
+            stats[:, 2].real,
+            stats[:, 3],
+            stats[:, 4],
+        )
         xm, ym = sx / p, sy / p
         S = sxx - (sx.real * xm.real + sx.imag * xm.imag)
         a = (sxy - np.conj(sx) * ym) / S
@@ -440,6 +469,7 @@ def match_fppm(
     V = Qc[None, :] - Qc[:, None]  # V[j, k] = y_k − y_j
     sigma2 = float(sigma) ** 2
     best_w, best_mse, best_asg = -1, math.inf, None
+    terms = _pair_terms(Pc, Qc)
     for i in range(m - w_min):  # rows with at least w_min points above them
         # no matching whose smallest pattern index is ≥ i has more than min(m − i, n) pairs
         if best_w > min(m - i, n) - 1 or (w_max is not None and best_w >= w_max):
@@ -447,7 +477,7 @@ def match_fppm(
         init = _row_seeds(Pc, V, i, sigma2, gamma, w_min, best_w, scale_range, mflag)
         if init.shape[0] == 0:
             continue
-        asg, p, mse = _grow(Pc, Qc, init, sigma2, gamma, scale_range, mflag)
+        asg, p, mse = _grow(Pc, Qc, init, sigma2, gamma, scale_range, mflag, terms)
         w = p - 1
         top = int(w.max())
         if top < w_min:
@@ -459,4 +489,51 @@ def match_fppm(
     if best_asg is None or best_w < w_min:
         return None
     i_idx = np.flatnonzero(best_asg >= 0)
-    return _match(P, Q, np.stack([i_idx, best_asg[i_idx]], axis=1).astype(np.int64))
+    match = _match(P, Q, np.stack([i_idx, best_asg[i_idx]], axis=1).astype(np.int64))
+    return _reassociate(P, Q, match, sigma2, gamma, scale_range, mflag)
+
+
+def _reassociate(
+    P: np.ndarray,
+    Q: np.ndarray,
+    match: PatternMatch,
+    sigma2: float,
+    gamma: float,
+    scale_range: tuple[float, float] | None,
+    mflag: np.ndarray | None,
+) -> PatternMatch:
+    """Undo the greedy growth's swaps: under the winner's registration, the one-to-one
+    assignment (Hungarian) of all pattern points to detections minimizing ``Σ min(ε, γ)``
+    with ``ε = ‖y_k − G(x_h)‖² / (σ² (1 + ℓ_h))`` (the test of a point against the matching;
+    ``ℓ_h`` its leverage); kept when it has more pairs, or as many and a smaller MSE."""
+    for _ in range(3):
+        x = np.take(P, match.pairs[:, 0], axis=0)
+        xm = x.mean(axis=0)
+        Sxx = float(np.vdot(x - xm, x - xm))
+        d = P - xm
+        lev = 1.0 / match.support + np.einsum("ij,ij->i", d, d) / Sxx
+        E = Q[None, :, :] - match.registration.apply(P)[:, None, :]
+        eps = np.einsum("hki,hki->hk", E, E) / (sigma2 * (1.0 + lev))[:, None]
+        cost = np.where(eps <= gamma, eps, _FAR)
+        if mflag is not None:
+            cost = np.where(mflag, cost, _FAR)
+        m, n = cost.shape
+        near = cost.argmin(axis=1)
+        mine = np.full(m, -1)
+        mine[match.pairs[:, 0]] = match.pairs[:, 1]
+        if np.array_equal(np.where(cost[np.arange(m), near] < gamma, near, -1), mine):
+            break  # every point at its nearest passing detection, all distinct: optimal
+        dummy = np.full((m, m), _FAR)
+        np.fill_diagonal(dummy, gamma)
+        rows, cols = linear_sum_assignment(np.hstack([cost, dummy]))
+        keep = cols < n
+        pairs = np.stack([rows[keep], cols[keep]], axis=1).astype(np.int64)
+        if pairs.shape[0] < 3 or np.array_equal(pairs, match.pairs):
+            break
+        new = _match(P, Q, pairs)
+        if scale_range is not None and not (scale_range[0] <= new.registration.s <= scale_range[1]):
+            break
+        if new.support < match.support or (new.support == match.support and new.mse >= match.mse):
+            break
+        match = new
+    return match

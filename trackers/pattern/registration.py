@@ -126,12 +126,12 @@ def fit_similarity(x: np.ndarray, y: np.ndarray, w: np.ndarray | None = None) ->
         xc = x - xm
         yc = y - ym
         wxc = xc * wv[:, None]
-    S = float(np.vdot(wxc, xc))  # Σ wᵢ ‖x̃ᵢ‖²
+    sxx = float(np.vdot(wxc, xc))  # S = Σ wᵢ ‖x̃ᵢ‖²
     scale_x = float(np.abs(x).max()) or 1.0
-    if S <= (1e-12 * scale_x) ** 2 * W:
+    if sxx <= (1e-12 * scale_x) ** 2 * W:
         raise ValueError("x: the points coincide, rotation and scale are not determined")
-    a1 = float(np.vdot(wxc, yc)) / S  # Σ wᵢ (x̃¹ỹ¹ + x̃²ỹ²) / S
-    a2 = float(np.vdot(wxc, yc @ _J)) / S  # Σ wᵢ (x̃¹ỹ² − x̃²ỹ¹) / S
+    a1 = float(np.vdot(wxc, yc)) / sxx  # Σ wᵢ (x̃¹ỹ¹ + x̃²ỹ²) / S
+    a2 = float(np.vdot(wxc, yc @ _J)) / sxx  # Σ wᵢ (x̃¹ỹ² − x̃²ỹ¹) / S
     s = math.hypot(a1, a2)
     if not s > 0:
         raise ValueError("y: the points coincide, the fitted scale is zero")

@@ -260,7 +260,6 @@ def pattern_snapshot(track: PatternTrack) -> TrackSnapshot:
     )
 
 
-
 def _logsumexp(a: np.ndarray, w: np.ndarray) -> float:
     """``ln Σ wᵢ e^{aᵢ}`` without overflow (``w > 0``)."""
     a = np.asarray(a, dtype=float) + np.log(w)
@@ -668,9 +667,7 @@ class PatternTracker:
                 )
                 if match is not None:
                     options.append(np.array(match.pairs, dtype=np.int64))
-            scores = [
-                _association_log_ratio(o, d2, logdet, preds.w, m, pd, lam) for o in options
-            ]
+            scores = [_association_log_ratio(o, d2, logdet, preds.w, m, pd, lam) for o in options]
             pairs = options[int(np.argmax(scores))]
             if not len(pairs):
                 return pairs
@@ -678,9 +675,7 @@ class PatternTracker:
 
         step = lmm_step if cfg.filter == "lmm" else imm_step
         kwargs = {"iterations": cfg.lmm_iterations} if cfg.filter == "lmm" else {}
-        new_est, info = step(
-            est, dt, z, R, associate, modes, pd=pd, clutter_density=lam, **kwargs
-        )
+        new_est, info = step(est, dt, z, R, associate, modes, pd=pd, clutter_density=lam, **kwargs)
         # ln Σ μ⁻ Λ over the shape layer's hypotheses (the IMM: over every mode).
         r_s = modes.sizes[2]
         if cfg.filter == "lmm":
@@ -829,9 +824,7 @@ class PatternTracker:
             dt = t - c.time
             v = ((sg.origin[0] - c.origin[0]) / dt, (sg.origin[1] - c.origin[1]) / dt)
             rate = _wrap(sg.attitude - c.attitude) / dt
-            seen = replace(
-                sg, seen=c.seen + 1, velocity=v, attitude_rate=rate, baseline=dt
-            )
+            seen = replace(sg, seen=c.seen + 1, velocity=v, attitude_rate=rate, baseline=dt)
             if seen.seen < cfg.birth_scans:
                 candidates.append(seen)
                 continue
