@@ -54,9 +54,7 @@ def _annotation(hint: Any, meta: Any) -> Any:
     if hint is str:
         return Literal[choices] if choices else Annotated[str, Strict()]  # type: ignore[valid-type]
     if get_origin(hint) is dict:  # name -> value (point_patterns.patterns)
-        key = Annotated[
-            str, Strict(), Field(min_length=1, max_length=meta.get("name_length", 64))
-        ]
+        key = Annotated[str, Strict(), Field(min_length=1, max_length=meta.get("name_length", 64))]
         value = _annotation(get_args(hint)[1], meta)
         return Annotated[dict[key, value], Field(max_length=meta.get("max_items"))]  # type: ignore[valid-type]
     if get_origin(hint) is tuple and get_args(hint)[-1] is not Ellipsis:  # fixed: (x, y)
