@@ -184,14 +184,19 @@ class RunResult:
 
 
 def run_filter(
-    run: BendingRun, modes: BendingModes, algorithm: str, x0: np.ndarray, P0: np.ndarray
+    run: BendingRun,
+    modes: BendingModes,
+    algorithm: str,
+    x0: np.ndarray,
+    P0: np.ndarray,
+    point_margin: float | None = POINT_GATE_MARGIN,
 ) -> RunResult:
     est: MMEstimate = initial_estimate(modes, x0, P0, algorithm=algorithm)
     step = imm_step if algorithm == "imm" else lmm_step
     xs, probs, step_s, assoc_s = [], [[], [], []], [], []
     for scan in run.scans:
         timer = [0.0]
-        assoc = make_associate(scan.detections, modes, run.R, timer)
+        assoc = make_associate(scan.detections, modes, run.R, timer, point_margin)
         t0 = time.perf_counter()
         est, _ = step(
             est,

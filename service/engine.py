@@ -90,22 +90,32 @@ class CommandRefused(ValueError):
         self.conflict = conflict
 
 
+def _kinematic_prior(position: Any, velocity: Any) -> tuple[np.ndarray, np.ndarray]:
+    """A hand-started track's position and velocity as arrays; raise
+    :class:`CommandRefused` unless they are finite and within ``MAX_ABS_POSITION`` (m)."""
+    try:
+        pos = np.array(position, dtype=float).reshape(2)
+        vel = np.array(velocity, dtype=float).reshape(2)
+    except (TypeError, ValueError) as exc:
+        raise CommandRefused(f"position, velocity: unusable: {exc}") from None
+    if not np.isfinite(pos).all() or np.abs(pos).max() > MAX_ABS_POSITION:
+        raise CommandRefused(f"position: finite numbers within ±{MAX_ABS_POSITION:g} m needed")
+    if not np.isfinite(vel).all():
+        raise CommandRefused("velocity: not finite numbers")
+    return pos, vel
+
+
 def _extended_prior(
     position: Any, velocity: Any, extent: Any
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """A hand-started extended track's centroid, velocity and extent as arrays; raise
     :class:`CommandRefused` unless they are finite, within ``MAX_ABS_POSITION`` (m) and the
     extent is a 2x2 symmetric positive definite matrix."""
+    pos, vel = _kinematic_prior(position, velocity)
     try:
-        pos = np.array(position, dtype=float).reshape(2)
-        vel = np.array(velocity, dtype=float).reshape(2)
         ext = np.array(extent, dtype=float).reshape(2, 2)
     except (TypeError, ValueError) as exc:
-        raise CommandRefused(f"position, velocity, extent: unusable: {exc}") from None
-    if not np.isfinite(pos).all() or np.abs(pos).max() > MAX_ABS_POSITION:
-        raise CommandRefused(f"position: finite numbers within ±{MAX_ABS_POSITION:g} m needed")
-    if not np.isfinite(vel).all():
-        raise CommandRefused("velocity: not finite numbers")
+        raise CommandRefused(f"extent: unusable: {exc}") from None
     (a, b), (c, d) = ext.tolist()
     if (
         not np.isfinite(ext).all()
@@ -451,6 +461,30 @@ class Engine:
             result = future.result()  # running now: its answer comes soon
         return result
 
+    def _start_by_hand(
+        self,
+        kind: str,
+        cls: type[PeerT],
+        start: Callable[[PeerT, float], TrackSnapshot],
+        at: float | None,
+        timeout: float,
+    ) -> dict[str, Any]:
+        """Run ``start(peer, t)`` on the worker for the switched-on peer of ``kind`` at the
+        time :meth:`_start_time` gives; its ``ValueError`` is a :class:`CommandRefused`. The
+        latest report lists the new track at once; the answer is its Track."""
+
+        def command(pipeline: TrackingPipeline) -> dict[str, Any]:
+            tracker = _switched_on_peer(pipeline, kind, cls)
+            t = self._start_time(pipeline, at)
+            try:
+                snap = start(tracker, t)
+            except ValueError as exc:
+                raise CommandRefused(str(exc)) from None
+            self._refresh_state(t)
+            return track_to_dict(snap)
+
+        return self.call_in_worker(command, timeout)
+
     def _start_time(self, pipeline: TrackingPipeline, at: float | None) -> float:
         """When a track started by hand starts: the last processed batch's time, or ``at``
         (not before it, nor more than ``ingest.max_time_jump`` after it; required before the
@@ -490,29 +524,23 @@ class Engine:
         lists it at once. Raises :class:`CommandRefused` (nothing changed) for an unknown
         pattern or unusable values, or when point-pattern tracking is switched off, and
         :class:`EngineUnavailable` as :meth:`call_in_worker`."""
-        pos, vel, _ = _extended_prior(position, velocity, np.eye(2))
+        pos, vel = _kinematic_prior(position, velocity)
 
-        def command(pipeline: TrackingPipeline) -> dict[str, Any]:
-            tracker = _switched_on_peer(pipeline, "point_patterns", PatternTracker)
-            t = self._start_time(pipeline, at)
-            try:
-                track = tracker.start(
-                    t,
-                    pattern,
-                    pos,
-                    vel,
-                    attitude,
-                    attitude_rate=attitude_rate,
-                    position_std=position_std,
-                    velocity_std=velocity_std,
-                    attitude_std=attitude_std,
-                )
-            except ValueError as exc:
-                raise CommandRefused(str(exc)) from None
-            self._refresh_state(t)
-            return track_to_dict(pattern_snapshot(track))
+        def start(tracker: PatternTracker, t: float) -> TrackSnapshot:
+            track = tracker.start(
+                t,
+                pattern,
+                pos,
+                vel,
+                attitude,
+                attitude_rate=attitude_rate,
+                position_std=position_std,
+                velocity_std=velocity_std,
+                attitude_std=attitude_std,
+            )
+            return pattern_snapshot(track)
 
-        return self.call_in_worker(command, timeout)
+        return self._start_by_hand("point_patterns", PatternTracker, start, at, timeout)
 
     def start_extended_track(
         self,
@@ -535,25 +563,19 @@ class Engine:
         :class:`EngineUnavailable` as :meth:`call_in_worker`."""
         pos, vel, ext = _extended_prior(position, velocity, extent)
 
-        def command(pipeline: TrackingPipeline) -> dict[str, Any]:
-            tracker = _switched_on_peer(pipeline, "extended", ExtendedTracker)
-            t = self._start_time(pipeline, at)
-            try:
-                track = tracker.start(
-                    t,
-                    pos,
-                    vel,
-                    ext,
-                    position_std=position_std,
-                    velocity_std=velocity_std,
-                    expected_detections=expected_detections,
-                )
-            except ValueError as exc:
-                raise CommandRefused(str(exc)) from None
-            self._refresh_state(t)
-            return track_to_dict(snapshot_of(track))
+        def start(tracker: ExtendedTracker, t: float) -> TrackSnapshot:
+            track = tracker.start(
+                t,
+                pos,
+                vel,
+                ext,
+                position_std=position_std,
+                velocity_std=velocity_std,
+                expected_detections=expected_detections,
+            )
+            return snapshot_of(track)
 
-        return self.call_in_worker(command, timeout)
+        return self._start_by_hand("extended", ExtendedTracker, start, at, timeout)
 
     def form_formation(self, members: list[str], *, timeout: float = 5.0) -> dict[str, Any]:
         """Ask for a formation of the live individual tracks ``members`` on the worker

@@ -31,7 +31,7 @@ def _errors(seed: int, algorithm: str, point_margin: float | None):
     import numpy as np
 
     from clients.scenarios.bending import bending_scenario, initial_covariance, paper_patterns
-    from trackers.pattern.multiple_model import imm_step, initial_estimate, lmm_step, paper_modes
+    from trackers.pattern.multiple_model import paper_modes
 
     patterns = paper_patterns()
     modes = paper_modes({"pattern-1": patterns[0], "pattern-2": patterns[1]})
@@ -39,25 +39,11 @@ def _errors(seed: int, algorithm: str, point_margin: float | None):
     run = bending_scenario(seed, patterns=patterns)
     rng = np.random.default_rng(10_000 + seed)  # as the benchmark's Monte Carlo
     x0 = run.initial_state + rng.multivariate_normal(np.zeros(6), P0)
-    est = initial_estimate(modes, x0, P0, algorithm=algorithm)
-    step = imm_step if algorithm == "imm" else lmm_step
-    pos, att = [], []
-    for scan in run.scans:
-        assoc = bending.make_associate(scan.detections, modes, run.R, [0.0], point_margin)
-        est, _ = step(
-            est,
-            run.dt,
-            scan.detections,
-            run.R,
-            assoc,
-            modes,
-            pd=run.pd,
-            clutter_density=run.clutter_density,
-        )
-        e = est.x - scan.state
-        pos.append(math.hypot(e[0], e[2]))
-        att.append(abs(math.degrees(math.remainder(e[4], 2 * math.pi))))
-    return np.array(pos), np.array(att)
+    result = bending.run_filter(run, modes, algorithm, x0, P0, point_margin)
+    e = result.x - np.array([scan.state for scan in run.scans])
+    pos = np.hypot(e[:, 0], e[:, 2])
+    att = np.abs(np.degrees(np.remainder(e[:, 4] + math.pi, 2 * math.pi) - math.pi))
+    return pos, att
 
 
 @pytest.mark.timeout(120)

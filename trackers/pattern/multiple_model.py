@@ -122,6 +122,7 @@ from dataclasses import dataclass
 from types import MappingProxyType
 
 import numpy as np
+from scipy.linalg import block_diag
 
 from trackers.filters.imm import MU_FLOOR
 from trackers.pattern.bending import (
@@ -879,17 +880,6 @@ def _exchange(
     )
 
 
-def _block_diag(mats: Sequence[np.ndarray]) -> np.ndarray:
-    K = sum(m.shape[0] for m in mats)
-    out = np.zeros((K, K))
-    i = 0
-    for m in mats:
-        k = m.shape[0]
-        out[i : i + k, i : i + k] = m
-        i += k
-    return out
-
-
 def lmm_step(
     est: MMEstimate,
     dt: float,
@@ -926,7 +916,7 @@ def lmm_step(
         est.filter_probabilities[r_g + r_p :],
     ]
     tilde = layered_transition_matrices(modes.transition, modes.sizes, mu_prev, iterations)
-    Pi = _block_diag(tilde)
+    Pi = block_diag(*tilde)
     eye_g, eye_p, eye_s = np.eye(r_g), np.eye(r_p), np.eye(r_s)
 
     def weights(c_bar: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -22,7 +22,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["Similarity", "fit_similarity", "rotation"]
+__all__ = ["Similarity", "fit_similarity", "rotation", "wrap_angle"]
 
 _J = np.array([[0.0, -1.0], [1.0, 0.0]])  # ỹ @ _J = [ỹ², −ỹ¹]
 
@@ -33,7 +33,7 @@ def rotation(theta: float) -> np.ndarray:
     return np.array([[c, -s], [s, c]])
 
 
-def _wrap(theta: float) -> float:
+def wrap_angle(theta: float) -> float:
     """``θ`` wrapped to ``(−π, π]``."""
     w = math.remainder(theta, 2.0 * math.pi)  # in [−π, π]
     return math.pi if w <= -math.pi else w
@@ -61,7 +61,7 @@ class Similarity:
             raise ValueError(f"t: must be finite, got {t.tolist()}")
         t.setflags(write=False)
         object.__setattr__(self, "s", float(self.s))
-        object.__setattr__(self, "theta", _wrap(float(self.theta)))
+        object.__setattr__(self, "theta", wrap_angle(float(self.theta)))
         object.__setattr__(self, "t", t)
 
     @property

@@ -71,6 +71,7 @@ from trackers.pattern.multiple_model import (
     transition_by_changes,
     validation_gate,
 )
+from trackers.pattern.registration import rotation, wrap_angle
 from trackers.peers import PeerProposal, PointTrackView
 from trackers.types import Scan, TrackSnapshot
 
@@ -188,12 +189,6 @@ def modes_of(cfg: PointPatternConfig) -> BendingModes | None:
     return BendingModes(principal, proper, shapes, Pi)
 
 
-def _wrap(a: float) -> float:
-    """``a`` wrapped to (−π, π]."""
-    w = math.remainder(a, 2.0 * math.pi)
-    return math.pi if w == -math.pi else w
-
-
 def _link_distance(patterns: tuple[np.ndarray, ...], tolerance: float, sigma: float) -> float:
     """Longest edge of any pattern's minimum spanning tree, grown by the scale tolerance and
     ``4σ√2``: the detections of one pattern are linked at this distance."""
@@ -224,8 +219,7 @@ def _shape_extent(pattern: np.ndarray, attitude: float) -> np.ndarray:
     q = pattern
     C = q.T @ q / len(q) + 1e-6 * np.eye(2)
     k = float(np.max(np.einsum("ni,ij,nj->n", q, np.linalg.inv(C), q)))
-    c, s = math.cos(attitude), math.sin(attitude)
-    Rm = np.array([[c, -s], [s, c]])
+    Rm = rotation(attitude)
     return Rm @ (max(k, 1.0) * C) @ Rm.T
 
 
@@ -255,7 +249,7 @@ def pattern_snapshot(track: PatternTrack) -> TrackSnapshot:
         model_probabilities=models,
         detection_ids=track.detection_ids,
         extent=extent_ellipse(_shape_extent(track.pattern_points, float(x[4]))),
-        attitude=_wrap(float(x[4])),
+        attitude=wrap_angle(float(x[4])),
         shape_probabilities=shapes,
     )
 
@@ -343,25 +337,49 @@ def _point_terms(
     return d2, np.log(det)
 
 
+@dataclass(frozen=True)
+class _ScanTerms:
+    """What every track's update takes from one scan, computed once: its detection
+    probability ``P_D`` and false-alarm density ``λ``, ``ln(P_D / λ) − ln 2π`` (a matched
+    point's log-likelihood ratio without its Gaussian exponent and determinant),
+    ``ln(1 − P_D)`` (a missed point's) and the detections' per-axis noise σ."""
+
+    pd: float
+    lam: float
+    log_hit: float
+    log_miss: float
+    sigma: float
+
+    @classmethod
+    def of(cls, scan: Scan, tm: TrackManagementConfig) -> _ScanTerms:
+        pd = tm.pd if scan.pd is None else float(scan.pd)
+        lam = tm.clutter_density if scan.clutter_density is None else float(scan.clutter_density)
+        return cls(
+            pd=pd,
+            lam=lam,
+            log_hit=math.log(pd / lam) - math.log(2.0 * math.pi),
+            log_miss=math.log1p(-min(pd, 1.0 - 1e-9)),
+            sigma=_sigma(scan.R) if scan.size else 0.0,
+        )
+
+
 def _association_log_ratio(
     pairs: np.ndarray,
     d2: np.ndarray,
     logdet: np.ndarray,
     w: np.ndarray,
     m: int,
-    pd: float,
-    lam: float,
+    terms: _ScanTerms,
 ) -> float:
     """``ln Σ_k w_k Λ_k`` of an association, ``Λ_k`` its likelihood ratio against all clutter
     under mode pair ``k``: ``Π_pairs P_D N(ν_ki; 0, S_ki) / λ · (1 − P_D)^{m − p}``."""
     i, j = pairs[:, 0], pairs[:, 1]
-    per = (math.log(pd / lam) - math.log(2.0 * math.pi)) - 0.5 * (logdet[:, i] + d2[:, i, j])
-    miss = (m - len(pairs)) * math.log1p(-min(pd, 1.0 - 1e-9))
-    return _logsumexp(per.sum(axis=1) + miss, w)
+    per = terms.log_hit - 0.5 * (logdet[:, i] + d2[:, i, j])
+    return _logsumexp(per.sum(axis=1) + (m - len(pairs)) * terms.log_miss, w)
 
 
 def _likeliest_assignment(
-    d2: np.ndarray, logdet: np.ndarray, gated: np.ndarray, pd: float, lam: float
+    d2: np.ndarray, logdet: np.ndarray, gated: np.ndarray, terms: _ScanTerms
 ) -> np.ndarray:
     """Under one mode pair: pattern points to detections (or missed), one to one, of least
     cost ``−ln(P_D N/λ)`` per pair against ``−ln(1 − P_D)`` per miss (the assignment
@@ -369,11 +387,11 @@ def _likeliest_assignment(
     m, n = d2.shape
     if not gated.any():
         return np.zeros((0, 2), dtype=np.int64)
-    pair_cost = -(math.log(pd / lam) - math.log(2.0 * math.pi)) + 0.5 * (logdet[:, None] + d2)
+    pair_cost = -terms.log_hit + 0.5 * (logdet[:, None] + d2)
     big = 1e12
     cost = np.full((m, n + m), big)
     cost[:, :n] = np.where(gated, pair_cost, big)
-    cost[np.arange(m), n + np.arange(m)] = -math.log1p(-min(pd, 1.0 - 1e-9))
+    cost[np.arange(m), n + np.arange(m)] = -terms.log_miss
     rows, cols = linear_sum_assignment(cost)
     keep = cols < n
     keep &= cost[rows, cols] < big
@@ -545,13 +563,12 @@ class PatternTracker:
             return PeerProposal(claimed=claimed, deleted=gone, state=new_state)
         if not state.tracks and not state.candidates and scan.size < cfg.min_matched:
             return PeerProposal(claimed=claimed, state=replace(state, time=t))
-        pd = tm.pd if scan.pd is None else float(scan.pd)
-        lam = tm.clutter_density if scan.clutter_density is None else float(scan.clutter_density)
+        terms = _ScanTerms.of(scan, tm)
         tree = cKDTree(scan.z) if scan.size else None
         kept: list[PatternTrack] = []
         deleted: list[str] = []
         for track in state.tracks:
-            new = self._update(track, scan, tree, claimed, t, cfg, modes, pd, lam)
+            new = self._update(track, scan, tree, claimed, cfg, modes, terms)
             dead = (t - new.updated > cfg.max_coast_time) or (
                 new.peak - new.score > tm.delete_drop_from_peak
             )
@@ -593,14 +610,13 @@ class PatternTracker:
         scan: Scan,
         tree: cKDTree | None,
         claimed: np.ndarray,
-        t: float,
         cfg: PointPatternConfig,
         modes: BendingModes,
-        pd: float,
-        lam: float,
+        terms: _ScanTerms,
     ) -> PatternTrack:
         """The track after this scan (paper 000's cycle); marks its detections in
         ``claimed``."""
+        t = float(scan.time)
         est = track.estimate
         dt = max(t - track.time, 0.0)
         x, P = est.x, est.P
@@ -611,7 +627,7 @@ class PatternTracker:
         turn = 0.5 * speed * cfg.turn_rate_rad * dt * dt + 0.5 * cfg.accel_std_cv * dt * dt
         rows = np.zeros(0, dtype=np.int64)
         if tree is not None:
-            radius = reach + turn + 5.0 * math.sqrt(spread + _sigma(scan.R) ** 2 * 2.0)
+            radius = reach + turn + 5.0 * math.sqrt(spread + terms.sigma**2 * 2.0)
             near = np.asarray(tree.query_ball_point(centre, radius), dtype=np.int64)
             rows = np.sort(near[~claimed[near]]) if near.size else rows
         z = np.take(scan.z, rows, axis=0)
@@ -651,7 +667,7 @@ class PatternTracker:
             # largest geometrically consistent set) among the pairs some mode gates; the
             # likeliest under the mixture of mode pairs is the association.
             options = [
-                _likeliest_assignment(d2[k], logdet[k], gated[k], pd, lam)
+                _likeliest_assignment(d2[k], logdet[k], gated[k], terms)
                 for k in range(len(preds.w))
             ]
             union = gated.any(axis=0)
@@ -667,7 +683,7 @@ class PatternTracker:
                 )
                 if match is not None:
                     options.append(np.array(match.pairs, dtype=np.int64))
-            scores = [_association_log_ratio(o, d2, logdet, preds.w, m, pd, lam) for o in options]
+            scores = [_association_log_ratio(o, d2, logdet, preds.w, m, terms) for o in options]
             pairs = options[int(np.argmax(scores))]
             if not len(pairs):
                 return pairs
@@ -675,7 +691,9 @@ class PatternTracker:
 
         step = lmm_step if cfg.filter == "lmm" else imm_step
         kwargs = {"iterations": cfg.lmm_iterations} if cfg.filter == "lmm" else {}
-        new_est, info = step(est, dt, z, R, associate, modes, pd=pd, clutter_density=lam, **kwargs)
+        new_est, info = step(
+            est, dt, z, R, associate, modes, pd=terms.pd, clutter_density=terms.lam, **kwargs
+        )
         # ln Σ μ⁻ Λ over the shape layer's hypotheses (the IMM: over every mode).
         r_s = modes.sizes[2]
         if cfg.filter == "lmm":
@@ -688,7 +706,7 @@ class PatternTracker:
         # The hypothesis that none of the detections is the target's is always there: the
         # likelihood ratio is at least that of every point missed, Σ_s μ_s (1 − P_D)^{m_s}.
         missed = _logsumexp(
-            np.array([len(q) * math.log1p(-min(pd, 1.0 - 1e-9)) for q in modes.patterns]),
+            np.array([len(q) * terms.log_miss for q in modes.patterns]),
             np.maximum(est.layer_probabilities[2], 1e-300),
         )
         gain = float(np.logaddexp(gain, missed))
@@ -804,14 +822,14 @@ class PatternTracker:
                 dt = t - c.time
                 if c.velocity is None:  # from one sighting: any speed up to max_speed
                     d = math.dist(c.origin, sg.origin)
-                    turned = abs(_wrap(sg.attitude - c.attitude))
+                    turned = abs(wrap_angle(sg.attitude - c.attitude))
                     ok = turned <= MAX_ATTITUDE_RATE * dt + ATTITUDE_MARGIN
                     ok = ok and d <= cfg.max_speed * dt + 6.0 * sg.sigma
                 else:  # from two or more: where its velocity and attitude rate lead
                     guess = (c.origin[0] + c.velocity[0] * dt, c.origin[1] + c.velocity[1] * dt)
                     d = math.dist(guess, sg.origin)
                     spread = 2.0 * sg.sigma * (1.0 + dt / c.baseline)
-                    turned = abs(_wrap(sg.attitude - c.attitude - c.attitude_rate * dt))
+                    turned = abs(wrap_angle(sg.attitude - c.attitude - c.attitude_rate * dt))
                     ok = turned <= ATTITUDE_MARGIN * (1.0 + dt / c.baseline)
                     ok = ok and d <= 3.0 * spread + 0.5 * BIRTH_ACCELERATION * dt * dt
                 if ok and d < best_d:
@@ -823,7 +841,7 @@ class PatternTracker:
             c = old[best_k]
             dt = t - c.time
             v = ((sg.origin[0] - c.origin[0]) / dt, (sg.origin[1] - c.origin[1]) / dt)
-            rate = _wrap(sg.attitude - c.attitude) / dt
+            rate = wrap_angle(sg.attitude - c.attitude) / dt
             seen = replace(sg, seen=c.seen + 1, velocity=v, attitude_rate=rate, baseline=dt)
             if seen.seen < cfg.birth_scans:
                 candidates.append(seen)
