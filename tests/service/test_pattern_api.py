@@ -10,11 +10,12 @@ from typing import Any
 import httpx
 import orjson
 import pytest
+import zenoh
 
 from clients.scenarios.bending import BendingRun, bending_scenario
 from tests.conftest import RunningService
 
-from .helpers import check_track, run_batches
+from .helpers import Collector, check_report, check_track, declare_publisher, run_batches
 
 pytestmark = pytest.mark.timeout(120)
 
@@ -148,3 +149,41 @@ def test_start_a_pattern_track_by_hand(service: RunningService) -> None:
         r = http.post(URL, json={**body, "time": 0.0}, headers=service.auth)
         assert r.status_code == 409
         assert http.get(URL).status_code == 405
+
+
+def test_pattern_tracks_over_zenoh(service: RunningService, peer: zenoh.Session) -> None:
+    """Detection batches published over Zenoh; the Track reports on ``tracking/tracks`` and
+    the state queryable carry the pattern track with ``attitude`` and
+    ``shape_probabilities``."""
+    run = bending_scenario(3)
+    with httpx.Client(base_url=service.url, timeout=10) as http:
+        r = http.patch(
+            "/api/v1/config",
+            json={"point_patterns": {"patterns": _patterns(run)}},
+            headers=service.auth,
+        )
+        assert r.status_code == 200
+    reports = Collector(peer, "tracking/tracks")
+    errors = Collector(peer, "tracking/errors/**")
+    try:
+        pub = declare_publisher(peer, "tracking/detections/radar-1")
+        for payload in _batches(run):
+            pub.put(payload)
+        pub.undeclare()
+        got = reports.wait_for(len(run.scans), timeout=30)
+        assert len(got) == len(run.scans)
+        last = reports.json()[-1]
+        check_report(last)
+        [track] = [t for t in last["tracks"] if "attitude" in t]
+        check_track(track)
+        assert track["kind"] == "extended" and track["id"].startswith("B")
+        assert track["shape_probabilities"]["four"] > 0.9
+        truth = run.scans[-1].state
+        assert abs(track["position"][0] - truth[0]) < 2 and abs(track["position"][1] - truth[2]) < 2
+        [reply] = list(peer.get("tracking/state/tracks", timeout=5))
+        assert reply.ok is not None
+        assert orjson.loads(reply.ok.payload.to_bytes()) == last
+        assert errors.items == []
+    finally:
+        reports.close()
+        errors.close()
