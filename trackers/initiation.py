@@ -52,7 +52,13 @@ from trackers.association.gating import max_eigenvalue_2x2
 from trackers.association.spatial import pairs_within
 from trackers.rows import RowArrays, sort_within_groups
 
-__all__ = ["Candidates", "TwoPointTracks", "pair_candidates", "two_point_estimate"]
+__all__ = [
+    "Candidates",
+    "TwoPointTracks",
+    "pair_candidates",
+    "search_radius",
+    "two_point_estimate",
+]
 
 #: Candidates and detections less than this far apart in time (s) are not paired: they say
 #: nothing about velocity (two sensors' scans at the same instant).
@@ -265,6 +271,46 @@ def _mixture_state(
     return x, P_mix, loglik
 
 
+def search_radius(
+    dt: np.ndarray,
+    base: np.ndarray,
+    noise: np.ndarray,
+    floor: float,
+    *,
+    max_speed: float,
+    velocity_std: float,
+    slow_fraction: float,
+    q: float,
+    gamma: float,
+) -> np.ndarray:
+    """How far from each candidate a detection can make a pair that scores above ``floor``
+    (−1 where none can), given ``base = L_c + ln(P_D/λ_fa)`` and ``noise``, an upper bound of
+    ``λ_max(R_c) + λ_max(R_j)``; a bound, so no pair that :func:`pair_candidates` would keep
+    lies beyond it.
+
+    A pair scores ``base + ln g₂`` with ``g₂ = w N(d; 0, S_s) + (1 − w) g_f`` and
+    ``g_f ≤ ḡ_f = 1/(π (v_max Δt)²)``. Where the fast term alone can pass, ``(1 − w) ḡ_f >
+    η₀ = e^{floor − base}``, the search covers the velocity gate, ``v_max Δt + √(γ noise)``.
+    Otherwise the slow term must exceed ``η = η₀ − (1 − w) ḡ_f``; since ``|S_s| ≥ α²``
+    (``α = σ_v² Δt² + q Δt³/3``) and ``|d|² ≤ λ_max(S_s) dᵀ S_s⁻¹ d``, that needs
+
+        |d|² < (noise + α) · (−2 ln(2π α η / w)),
+
+    and no detection qualifies when the logarithm is not negative. In dense clutter this
+    shrinks the search from kilometres to the slow targets' reach: older candidates, whose
+    score the misses have lowered, can no longer start a fast track."""
+    reach = max_speed * dt
+    fast = reach + np.sqrt(gamma * noise)
+    g_fast = (1.0 - slow_fraction) / (math.pi * np.maximum(reach, 1e-9) ** 2)
+    with np.errstate(over="ignore"):
+        eta = np.exp(floor - base) - g_fast
+    alpha = velocity_std**2 * dt**2 + q * dt**3 / 3.0
+    with np.errstate(divide="ignore", invalid="ignore"):
+        m2 = -2.0 * np.log(2.0 * math.pi * alpha * np.maximum(eta, 1e-300) / slow_fraction)
+    slow = np.where(m2 > 0.0, np.sqrt((noise + alpha) * np.maximum(m2, 0.0)), -1.0)
+    return np.where(eta > 0.0, np.minimum(slow, fast), fast)
+
+
 def pair_candidates(
     candidates: Candidates,
     z: np.ndarray,
@@ -299,9 +345,24 @@ def pair_candidates(
         return none
     zf, Rf = z[free_idx], R[free_idx]
     noise = float(max_eigenvalue_2x2(Rf).max())
-    zc, Rc = candidates.z[offered], candidates.R[offered]
-    radius = max_speed * dt_all[offered] + np.sqrt(gamma * (max_eigenvalue_2x2(Rc) + noise))
-    i, fj = pairs_within(zc, radius, zf)
+    floor_min = float(min_score) if np.ndim(min_score) == 0 else float(np.min(min_score[free_idx]))
+    lam_c = max_eigenvalue_2x2(candidates.R[offered])
+    radius = search_radius(
+        dt_all[offered],
+        candidates.score[offered] + (math.log(pd) - math.log(clutter_density)),
+        lam_c + noise,
+        floor_min,
+        max_speed=max_speed,
+        velocity_std=velocity_std,
+        slow_fraction=slow_fraction,
+        q=q,
+        gamma=gamma,
+    )
+    searched = np.flatnonzero(radius >= 0.0)
+    offered = offered[searched]
+    if offered.size == 0:
+        return none
+    i, fj = pairs_within(candidates.z[offered], radius[searched], zf)
     n = i.size
     if n == 0:
         return none

@@ -5,9 +5,10 @@ import math
 import numpy as np
 import pytest
 
+import trackers.initiation as initiation
 from trackers.config import TrackerConfig
 from trackers.individual import IndividualTracker
-from trackers.initiation import Candidates, pair_candidates, two_point_estimate
+from trackers.initiation import Candidates, pair_candidates, search_radius, two_point_estimate
 
 
 def scan_at(t, points, sigma=30.0, lam=1e-8, pd=0.9):
@@ -190,3 +191,49 @@ def test_pairs_below_a_detections_floor_are_left_out():
     assert kept.size == 1
     floor = np.array([kept.score[0] + 0.1])
     assert pair_candidates(cand, z, R, np.ones(1, dtype=bool), 1.0, min_score=floor, **kw).size == 0
+
+
+@pytest.mark.parametrize(
+    ("clutter_density", "score", "dt"),
+    [(1e-6, -2.3, 5.0), (1e-6, -4.6, 10.0), (1e-8, 0.0, 4.0), (1e-4, -1.0, 1.0), (1e-6, 2.0, 0.5)],
+)
+def test_the_search_radius_drops_no_pair_that_would_be_kept(
+    monkeypatch, clutter_density, score, dt
+):
+    """Pairs found within the score bound's radius are exactly those found when every
+    candidate searches its whole velocity gate, whatever the clutter and candidate score."""
+    rng = np.random.default_rng(7)
+    n = 300
+    cand = candidates_at(rng.uniform(-20e3, 20e3, (n, 2)), variance=400.0)
+    cand = Candidates(**{**cand.__dict__, "score": np.full(n, score)})
+    z = rng.uniform(-20e3, 20e3, (n, 2))
+    z[:40] = cand.z[:40] + rng.normal(0, 60.0, (40, 2))  # slow movers among the clutter
+    R = np.tile(np.diag([2500.0, 400.0]), (n, 1, 1))
+    kwargs = dict(PAIRING, clutter_density=clutter_density, min_score=-6.9)
+    bounded = pair_candidates(cand, z, R, np.ones(n, dtype=bool), dt, **kwargs)
+
+    def whole_gate(dt, base, noise, floor, *, max_speed, gamma, **_):
+        return max_speed * dt + np.sqrt(gamma * noise)
+
+    monkeypatch.setattr(initiation, "search_radius", whole_gate)
+    reference = pair_candidates(cand, z, R, np.ones(n, dtype=bool), dt, **kwargs)
+    assert reference.size > 0
+    for field in ("candidate", "detection", "x", "P", "score"):
+        np.testing.assert_array_equal(getattr(bounded, field), getattr(reference, field))
+
+
+def test_the_search_radius_shrinks_to_slow_reach_where_fast_starts_cannot_score():
+    """With 1e-6 false alarms per m², a candidate that has missed a scan cannot start a fast
+    track: its search is a slow target's reach, not 700 m/s times the interval; with sparse
+    clutter the whole velocity gate is searched."""
+    dt = np.array([10.0])
+    noise = np.array([800.0])
+    kwargs = dict(max_speed=700.0, velocity_std=15.0, slow_fraction=0.8, q=0.5, gamma=18.4)
+    base = -4.6 + math.log(0.9 / 1e-6)
+    r = search_radius(dt, np.array([base]), noise, -6.9, **kwargs)[0]
+    assert 0 < r < 1000.0
+    sparse = -4.6 + math.log(0.9 / 1e-9)
+    r = search_radius(dt, np.array([sparse]), noise, -6.9, **kwargs)[0]
+    assert r == pytest.approx(700.0 * 10.0 + math.sqrt(18.4 * 800.0))
+    hopeless = search_radius(dt, np.array([-40.0]), noise, -6.9, **kwargs)[0]
+    assert hopeless < 0
