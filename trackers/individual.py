@@ -99,10 +99,7 @@ class TrackArrays(RowArrays):
 
 def _objects(items: Sequence[object]) -> np.ndarray:
     """A 1-D object array holding ``items`` as they are (tuples stay tuples)."""
-    out = np.empty(len(items), dtype=object)
-    for i, item in enumerate(items):
-        out[i] = item
-    return out
+    return np.fromiter(items, dtype=object, count=len(items))
 
 
 @dataclass(frozen=True, eq=False)

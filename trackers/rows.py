@@ -21,9 +21,13 @@ class RowArrays:
     def take(self, index: np.ndarray) -> Self:
         """The rows at ``index`` (integer indices or a boolean mask); ``self`` itself when a
         mask keeps every row (the arrays are never written in place)."""
-        if index.dtype == bool and index.all():
-            return self
-        return type(self)(**{k: getattr(self, k)[index] for k in self.__dataclass_fields__})
+        if index.dtype == bool:
+            if index.all():
+                return self
+            index = np.flatnonzero(index)
+        return type(self)(
+            **{k: np.take(getattr(self, k), index, axis=0) for k in self.__dataclass_fields__}
+        )
 
     def concat(self, other: Self) -> Self:
         """These rows followed by ``other``'s."""

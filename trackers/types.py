@@ -87,7 +87,7 @@ class Scan:
             time=self.time,
             z=self.z[idx],
             R=self.R[idx],
-            detection_ids=tuple(self.detection_ids[i] for i in idx),
+            detection_ids=tuple([self.detection_ids[i] for i in idx.tolist()]),
             pd=self.pd,
             clutter_density=self.clutter_density,
             sensor_position=self.sensor_position,
