@@ -13,15 +13,25 @@ cost grows with the number of close pairs, not with the square of the number of 
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from scipy.spatial import cKDTree
 
-__all__ = ["component_labels", "nested_unions", "resolution_subsets"]
+__all__ = [
+    "component_labels",
+    "nested_unions",
+    "pair_subsets",
+    "point_subsets",
+    "resolution_subsets",
+]
 
 #: Up to this many points, every pair's distance is computed (a k-d tree's set-up costs more).
 BRUTE_FORCE_POINTS = 64
 #: Up to this many edges, components come from a union-find loop; above, from array rounds.
 UNION_FIND_EDGES = 512
+#: Up to this many points, :func:`point_subsets` tests every pair in plain Python.
+PYTHON_POINTS = 32
 
 
 def resolution_subsets(Z: np.ndarray, d_res: float, min_size: int = 1) -> list[np.ndarray]:
@@ -34,7 +44,7 @@ def resolution_subsets(Z: np.ndarray, d_res: float, min_size: int = 1) -> list[n
     """
     Z = np.asarray(Z, dtype=float).reshape(-1, 2)
     n = Z.shape[0]
-    if not (np.isfinite(d_res) and d_res > 0):
+    if not (math.isfinite(d_res) and d_res > 0):
         raise ValueError(f"d_res: must be a finite number > 0, got {d_res!r}")
     if n < max(min_size, 1):
         return []
@@ -49,14 +59,38 @@ def resolution_subsets(Z: np.ndarray, d_res: float, min_size: int = 1) -> list[n
     else:
         pairs = cKDTree(Z).query_pairs(r=float(d_res), output_type="ndarray")
         i, j = pairs[:, 0], pairs[:, 1]
+    return pair_subsets(n, i, j, min_size)
+
+
+def pair_subsets(n: int, i: np.ndarray, j: np.ndarray, min_size: int = 1) -> list[np.ndarray]:
+    """The connected components of the undirected graph on ``n`` nodes with edges
+    ``(iₖ, jₖ)`` as arrays of nodes (ascending within a component; components ordered by
+    their smallest node), only those of at least ``min_size`` nodes: the subsets of
+    :func:`resolution_subsets` from the pairs closer than the resolution distance."""
+    if n == 0 or n < min_size:
+        return []
+    if len(i) <= UNION_FIND_EDGES and (min_size > 1 or n <= BRUTE_FORCE_POINTS):
+        # A few edges: union-find over the nodes they touch, grouped in plain Python. With
+        # min_size > 1 an untouched node (a component of one) is never wanted.
+        roots = _roots(i.tolist(), j.tolist())
+        groups: dict[int, list[int]] = {}
+        if min_size > 1:
+            for a, r in roots.items():
+                groups.setdefault(r, []).append(a)
+            big = sorted(sorted(g) for g in groups.values() if len(g) >= min_size)
+            return [np.array(g, dtype=np.intp) for g in big]
+        # a component's root is its smallest node, so the groups come in order of it
+        for a in range(n):
+            groups.setdefault(roots.get(a, a), []).append(a)
+        return [np.array(g, dtype=np.intp) for g in groups.values()]
     labels = component_labels(n, i, j)
     counts = np.bincount(labels, minlength=n)
     if min_size > 1:
         big = np.flatnonzero(counts >= min_size)
         return [np.flatnonzero(labels == k) for k in big.tolist()]
-    order = np.argsort(labels, kind="stable")
-    bounds = np.cumsum(counts[counts > 0])[:-1]
-    return np.split(order.astype(np.intp), bounds)
+    order = np.argsort(labels, kind="stable").astype(np.intp)
+    ends = np.cumsum(counts[counts > 0]).tolist()
+    return [order[a:b] for a, b in zip([0, *ends[:-1]], ends, strict=True)]
 
 
 def component_labels(n: int, i: np.ndarray, j: np.ndarray) -> np.ndarray:
@@ -95,8 +129,47 @@ def nested_unions(subsets: list[np.ndarray], fit: np.ndarray) -> list[np.ndarray
 
 
 def _union_find_labels(n: int, i: np.ndarray, j: np.ndarray) -> np.ndarray:
-    """:func:`component_labels` by union-find with path halving, the smaller root kept (a
-    plain loop: faster than array rounds for a few hundred edges)."""
+    """:func:`component_labels` by union-find (:func:`_roots`; a plain loop: faster than
+    array rounds for a few hundred edges). Nodes without an edge are their own label."""
+    labels = np.arange(n, dtype=np.intp)
+    roots = _roots(i.tolist(), j.tolist())
+    if roots:
+        labels[list(roots)] = list(roots.values())
+    return labels
+
+
+def _roots(i: list[int], j: list[int]) -> dict[int, int]:
+    """Union-find with path halving over the edges ``(iₖ, jₖ)``, the smaller root kept: the
+    root of each node that has an edge, which is the smallest node of its component."""
+    parent = {a: a for a in i + j}
+
+    def root(a: int) -> int:
+        while parent[a] != a:
+            parent[a] = parent[parent[a]]
+            a = parent[a]
+        return a
+
+    for a, b in zip(i, j, strict=True):
+        ra, rb = root(a), root(b)
+        if ra < rb:
+            parent[rb] = ra
+        elif rb < ra:
+            parent[ra] = rb
+    return {a: root(a) for a in parent}
+
+
+def point_subsets(points: list[tuple[float, float]], d_res: float) -> list[list[int]]:
+    """:func:`resolution_subsets` (every subset) of a few points given as ``(x, y)`` floats,
+    as lists of their positions: for a handful of points, plain Python beats array set-up.
+    The same arithmetic as the array path (``Δx² + Δy² ≤ d_res²``), so the same subsets;
+    the points are swept in order of x, each against the next ones until ``Δx² > d_res²``."""
+    n = len(points)
+    if n > PYTHON_POINTS:
+        Z = np.array(points, dtype=float).reshape(-1, 2)
+        return [s.tolist() for s in resolution_subsets(Z, d_res)]
+    if not (math.isfinite(d_res) and d_res > 0):
+        raise ValueError(f"d_res: must be a finite number > 0, got {d_res!r}")
+    d2 = float(d_res) ** 2
     parent = list(range(n))
 
     def root(a: int) -> int:
@@ -105,10 +178,22 @@ def _union_find_labels(n: int, i: np.ndarray, j: np.ndarray) -> np.ndarray:
             a = parent[a]
         return a
 
-    for a, b in zip(i.tolist(), j.tolist(), strict=True):
-        ra, rb = root(a), root(b)
-        if ra < rb:
-            parent[rb] = ra
-        elif rb < ra:
-            parent[ra] = rb
-    return np.fromiter((root(a) for a in range(n)), dtype=np.intp, count=n)
+    by_x = sorted(range(n), key=lambda k: points[k][0])
+    for p, a in enumerate(by_x):
+        xa, ya = points[a]
+        for b in by_x[p + 1 :]:
+            xb, yb = points[b]
+            dx = xa - xb  # (xb − xa)² grows along the sweep and never exceeds the sum
+            if dx * dx > d2:
+                break
+            dy = ya - yb
+            if dx * dx + dy * dy <= d2:
+                ra, rb = root(a), root(b)
+                if ra < rb:
+                    parent[rb] = ra
+                elif rb < ra:
+                    parent[ra] = rb
+    groups: dict[int, list[int]] = {}
+    for a in range(n):  # a component's root is its smallest node: groups in order of it
+        groups.setdefault(root(a), []).append(a)
+    return list(groups.values())

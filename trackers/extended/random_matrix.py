@@ -33,19 +33,25 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
 __all__ = [
     "ExtendedEstimate",
+    "Moments",
     "gate_covariance",
     "innovation_covariance",
+    "innovation_entries",
     "inv_sqrtm_2x2",
     "merged",
+    "moments",
+    "moments_log_likelihood",
     "predict",
     "sqrtm_2x2",
     "subset_log_likelihood",
     "update",
+    "update_moments",
 ]
 
 _LOG_2PI = math.log(2.0 * math.pi)
@@ -86,6 +92,19 @@ class ExtendedEstimate:
             arr.setflags(write=False)
             object.__setattr__(self, name, arr)
         object.__setattr__(self, "alpha", float(self.alpha))
+
+    @classmethod
+    def _of(cls, x: np.ndarray, P: np.ndarray, X: np.ndarray, alpha: float) -> ExtendedEstimate:
+        """An estimate from arrays this module has just made (float, right shapes, owned by
+        nobody else; or an estimate's own read-only array): they are made read-only and kept,
+        not copied. The filter functions' per-scan path."""
+        est = object.__new__(cls)
+        for name, arr in (("x", x), ("P", P), ("X", X)):
+            if arr.flags.writeable:
+                arr.setflags(write=False)
+            object.__setattr__(est, name, arr)
+        object.__setattr__(est, "alpha", float(alpha))
+        return est
 
 
 # --- 2x2 symmetric matrix roots ----------------------------------------------------------------
@@ -198,7 +217,7 @@ def _spd(A: np.ndarray, name: str) -> Sym:
     A = np.asarray(A, dtype=float)
     if A.shape != (2, 2):
         raise ValueError(f"{name} must have shape (2, 2), got {A.shape}")
-    a, b01, b10, c = (float(v) for v in A.ravel())
+    a, b01, b10, c = A.ravel().tolist()
     if not (math.isfinite(a) and math.isfinite(b01) and math.isfinite(b10) and math.isfinite(c)):
         raise ValueError(f"{name} must be finite, got {A.tolist()}")
     if abs(b01 - b10) > _SYMMETRY_RTOL * (abs(a) + abs(c)):
@@ -213,7 +232,8 @@ def _estimate(est: ExtendedEstimate) -> Sym:
     """Checks ``est`` (finite x and P, SPD X, α > 0); returns X as ``(a, b, c)``."""
     if not isinstance(est, ExtendedEstimate):
         raise ValueError(f"expected an ExtendedEstimate, got {type(est).__name__}")
-    if not (np.isfinite(est.x).all() and np.isfinite(est.P).all()):
+    # (on Python floats: faster than numpy reductions for 20 values)
+    if not all(map(math.isfinite, est.x.tolist() + est.P.ravel().tolist())):
         raise ValueError("ExtendedEstimate x and P must be finite")
     if not (math.isfinite(est.alpha) and est.alpha > 0.0):
         raise ValueError(f"ExtendedEstimate.alpha must be finite and > 0, got {est.alpha}")
@@ -245,6 +265,25 @@ def _set_inputs(
     """The checked inputs of a set of detections: ``Z (n, 2)``, R's entries, z and X's
     entries (raises ``ValueError`` as :func:`update` documents)."""
     return _detections(Z), _spd(R, "R"), _z_scale(z_scale), _estimate(est)
+
+
+class Moments(NamedTuple):
+    """What the filter needs of ``n ≥ 1`` detections ``yʲ``: ``n``, their mean
+    ``ȳ = (1/n) Σ yʲ`` and their scatter ``Ȳ = Σ (yʲ − ȳ)(yʲ − ȳ)ᵀ`` as ``(a, b, c)``."""
+
+    n: int
+    mean: tuple[float, float]
+    scatter: Sym
+
+
+def moments(Z: np.ndarray) -> Moments:
+    """The :class:`Moments` of the detections ``Z (n ≥ 1, 2)``; ValueError for bad or no
+    detections."""
+    Z = _detections(Z)
+    if Z.shape[0] == 0:
+        raise ValueError("moments need at least one detection")
+    y0, y1, scatter = _scatter(Z)
+    return Moments(Z.shape[0], (y0, y1), scatter)
 
 
 def _scatter(Z: np.ndarray) -> tuple[float, float, Sym]:
@@ -289,26 +328,26 @@ def predict(est: ExtendedEstimate, dt: float, q: float, tau: float) -> ExtendedE
         raise ValueError(f"tau must be > 0, got {tau}")
     _estimate(est)
 
-    x, P = est.x, est.P
-    x_new = x.copy()
-    x_new[:2] += T * x[2:]
-    # F P Fᵀ with F = [[I, T I], [0, I]]: rows then columns of the position block gain T·velocity.
-    FP = P.copy()
-    FP[:2] += T * P[2:]
-    P_new = FP.copy()
-    P_new[:, :2] += T * FP[:, 2:]
+    # On Python floats (a 4x4 is too small for numpy to pay), operation for operation as
+    # F P Fᵀ + Q written out: rows, then columns, of the position block gain T·velocity.
+    x0, x1, x2, x3 = est.x.tolist()
+    p = est.P.tolist()
+    fp = [[p[i][j] + T * p[i + 2][j] for j in range(4)] for i in range(2)] + p[2:]
+    pn = [[r[0] + T * r[2], r[1] + T * r[3], r[2], r[3]] for r in fp]
     q11, q12, q22 = q * T**3 / 3.0, q * T**2 / 2.0, q * T
-    P_new[0, 0] += q11
-    P_new[1, 1] += q11
-    P_new[0, 2] += q12
-    P_new[2, 0] += q12
-    P_new[1, 3] += q12
-    P_new[3, 1] += q12
-    P_new[2, 2] += q22
-    P_new[3, 3] += q22
-    P_new = 0.5 * (P_new + P_new.T)
+    pn[0][0] += q11
+    pn[1][1] += q11
+    pn[0][2] += q12
+    pn[2][0] += q12
+    pn[1][3] += q12
+    pn[3][1] += q12
+    pn[2][2] += q22
+    pn[3][3] += q22
+    P_new = [[0.5 * (pn[i][j] + pn[j][i]) for j in range(4)] for i in range(4)]
     alpha = 2.0 + math.exp(-T / tau) * (est.alpha - 2.0)
-    return ExtendedEstimate(x_new, P_new, est.X, alpha)
+    return ExtendedEstimate._of(
+        np.array([x0 + T * x2, x1 + T * x3, x2, x3]), np.array(P_new), est.X, alpha
+    )
 
 
 def update(
@@ -343,13 +382,25 @@ def update(
         ValueError: wrong shapes, non-finite values, non-SPD R or X, ``z_scale ≤ 0``,
             ``α ≤ 0``.
     """
-    Z, (ra, rb, rc), z, (xa, xb, xc) = _set_inputs(est, Z, R, z_scale)
-    n = Z.shape[0]
-    if n == 0:
+    Z, R_entries, z, X_entries = _set_inputs(est, Z, R, z_scale)
+    if Z.shape[0] == 0:
         return est
+    return _update(est, moments(Z), R_entries, z, X_entries)
 
+
+def update_moments(
+    est: ExtendedEstimate, m: Moments, R: np.ndarray, z_scale: float = 0.25
+) -> ExtendedEstimate:
+    """:func:`update` from the detections' :func:`moments` (found once for both this and
+    :func:`moments_log_likelihood`): the same estimate, to the bit."""
+    return _update(est, m, _spd(R, "R"), _z_scale(z_scale), _estimate(est))
+
+
+def _update(est: ExtendedEstimate, mom: Moments, R: Sym, z: float, X: Sym) -> ExtendedEstimate:
+    """:func:`update` on checked inputs (``R`` and ``X`` as ``(a, b, c)``)."""
+    (ra, rb, rc), (xa, xb, xc) = R, X
+    n, (y0, y1), (ba, bb, bc) = mom
     x, P, alpha = est.x, est.P, est.alpha
-    y0, y1, (ba, bb, bc) = _scatter(Z)
     # Y = z X + R; S = H P Hᵀ + Y / n.
     ya, yb, yc = z * xa + ra, z * xb + rb, z * xc + rc
     sa = float(P[0, 0]) + ya / n
@@ -387,7 +438,7 @@ def update(
     Xa = (alpha * xa + w0 * w0 + za) * k
     Xb = (alpha * xb + w0 * w1 + zb) * k
     Xc = (alpha * xc + w1 * w1 + zc) * k
-    return ExtendedEstimate(x_new, P_new, np.array([[Xa, Xb], [Xb, Xc]]), alpha + n)
+    return ExtendedEstimate._of(x_new, P_new, np.array([[Xa, Xb], [Xb, Xc]]), alpha + n)
 
 
 def innovation_covariance(
@@ -410,15 +461,25 @@ def innovation_covariance(
         ValueError: ``n < 1`` or not an integer, non-SPD R or X, non-finite values,
             ``z_scale ≤ 0``.
     """
+    sa, sb, sc = innovation_entries(est, n, R, z_scale)
+    return np.array([[sa, sb], [sb, sc]])
+
+
+def innovation_entries(est: ExtendedEstimate, n: int, R: np.ndarray, z_scale: float = 0.25) -> Sym:
+    """:func:`innovation_covariance` as the floats ``(S₀₀, S₀₁, S₁₁)`` of the symmetric
+    ``S = ½ (H P Hᵀ + (H P Hᵀ)ᵀ) + (z X + R) / n``; same checks and errors."""
     if isinstance(n, bool) or not isinstance(n, int | np.integer) or n < 1:
         raise ValueError(f"n must be an integer >= 1, got {n!r}")
     ra, rb, rc = _spd(R, "R")
     z = _z_scale(z_scale)
     xa, xb, xc = _estimate(est)
-    P = est.P
-    S = 0.5 * (P[:2, :2] + P[:2, :2].T)
-    S = S + np.array([[z * xa + ra, z * xb + rb], [z * xb + rb, z * xc + rc]]) / int(n)
-    return S
+    (p00, p01), (p10, p11) = est.P[:2, :2].tolist()
+    k = int(n)
+    return (
+        0.5 * (p00 + p00) + (z * xa + ra) / k,
+        0.5 * (p01 + p10) + (z * xb + rb) / k,
+        0.5 * (p11 + p11) + (z * xc + rc) / k,
+    )
 
 
 def gate_covariance(est: ExtendedEstimate, R: np.ndarray, z_scale: float = 0.25) -> np.ndarray:
@@ -495,13 +556,33 @@ def subset_log_likelihood(
         ValueError: ``n = 0``, wrong shapes, non-finite values, non-SPD R or X,
             ``z_scale ≤ 0``.
     """
-    Z, (ra, rb, rc), z, (xa, xb, xc) = _set_inputs(est, Z, R, z_scale)
-    n = Z.shape[0]
-    if n == 0:
+    Z, R_entries, z, X_entries = _set_inputs(est, Z, R, z_scale)
+    if Z.shape[0] == 0:
         raise ValueError("subset_log_likelihood needs at least one detection")
+    return _log_likelihood(est, moments(Z), R_entries, z, X_entries, extent_uncertain)
 
+
+def moments_log_likelihood(
+    est: ExtendedEstimate,
+    m: Moments,
+    R: np.ndarray,
+    z_scale: float = 0.25,
+    extent_uncertain: bool = False,
+) -> float:
+    """:func:`subset_log_likelihood` from the detections' :func:`moments`: the same value,
+    to the bit."""
+    return _log_likelihood(
+        est, m, _spd(R, "R"), _z_scale(z_scale), _estimate(est), extent_uncertain
+    )
+
+
+def _log_likelihood(
+    est: ExtendedEstimate, mom: Moments, R: Sym, z: float, X: Sym, extent_uncertain: bool
+) -> float:
+    """:func:`subset_log_likelihood` on checked inputs (``R`` and ``X`` as ``(a, b, c)``)."""
+    (ra, rb, rc), (xa, xb, xc) = R, X
+    n, (y0, y1), (ba, bb, bc) = mom
     x, P = est.x, est.P
-    y0, y1, (ba, bb, bc) = _scatter(Z)
     ya, yb, yc = z * xa + ra, z * xb + rb, z * xc + rc
     sa = float(P[0, 0]) + ya / n
     sb = 0.5 * float(P[0, 1] + P[1, 0]) + yb / n

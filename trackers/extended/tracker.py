@@ -40,7 +40,9 @@ velocity and extent prior; such a track is confirmed at once.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, replace
+from functools import cached_property
 
 import numpy as np
 from scipy.spatial import cKDTree
@@ -48,14 +50,17 @@ from scipy.spatial import cKDTree
 from trackers.association.gating import max_eigenvalue_2x2
 from trackers.association.spatial import pairs_within
 from trackers.config import ExtendedConfig, TrackerConfig, TrackManagementConfig
-from trackers.extended.partition import nested_unions, resolution_subsets
+from trackers.extended.partition import pair_subsets, point_subsets, resolution_subsets
 from trackers.extended.random_matrix import (
     ExtendedEstimate,
-    gate_covariance,
+    Moments,
+    innovation_entries,
     merged,
+    moments,
+    moments_log_likelihood,
     predict,
-    subset_log_likelihood,
     update,
+    update_moments,
 )
 from trackers.peers import PeerProposal, PointTrackView, ResolutionCell
 from trackers.scoring import initial_score
@@ -194,11 +199,28 @@ def extent_ellipse(X: np.ndarray) -> Extent:
     return Extent(matrix=X.copy(), semi_axes=(math.sqrt(l1), math.sqrt(l2)), orientation=theta)
 
 
-def _grown(X: np.ndarray, margin: float) -> np.ndarray:
-    """The shape matrix of the ellipse ``pᵀ X⁻¹ p ≤ 1`` with each semi-axis longer by
-    ``margin``: ``V diag((√λᵢ + m)²) Vᵀ``."""
-    w, V = np.linalg.eigh(X)
-    return (V * (np.sqrt(np.maximum(w, 0.0)) + margin) ** 2) @ V.T
+def _grown(X: np.ndarray, *margins: float) -> tuple[np.ndarray, ...]:
+    """The shape matrices of the ellipse ``pᵀ X⁻¹ p ≤ 1`` with each semi-axis longer by
+    ``m``, one for each of the ``margins``: ``V diag((√λᵢ + m)²) Vᵀ``. Written out for the
+    2x2 ``X = [[a, b], [b, c]]`` with eigenvalues ``λ₁ ≥ λ₂ > 0``, it is
+
+        (√λ₂ + m)² I + k (X − λ₂ I),    k = 1 + 2 m / (√λ₁ + √λ₂)
+
+    (``X − λ₂ I`` is ``(λ₁ − λ₂) v₁v₁ᵀ``, and ``k (λ₁ − λ₂) = (√λ₁ + m)² − (√λ₂ + m)²``).
+    A matrix that is not positive definite takes ``V`` from ``eigh``, its ``λᵢ`` clamped at 0."""
+    (a, b), (_, c) = X.tolist()
+    mean, half = 0.5 * (a + c), math.hypot(0.5 * (a - c), b)
+    l2 = mean - half
+    if not l2 > 0.0:
+        w, V = np.linalg.eigh(X)
+        root = np.sqrt(np.maximum(w, 0.0))
+        return tuple((V * (root + m) ** 2) @ V.T for m in margins)
+    r1, r2 = math.sqrt(mean + half), math.sqrt(l2)
+    out = []
+    for m in margins:
+        s2, k = (r2 + m) ** 2, 1.0 + 2.0 * m / (r1 + r2)
+        out.append(np.array([[s2 + k * (a - l2), k * b], [k * b, s2 + k * (c - l2)]]))
+    return tuple(out)
 
 
 def _log_poisson(n: int, gamma: float) -> float:
@@ -208,65 +230,158 @@ def _log_poisson(n: int, gamma: float) -> float:
 
 def _mahalanobis(d: np.ndarray, S: np.ndarray) -> np.ndarray:
     """``dᵢᵀ Sᵢ⁻¹ dᵢ`` for ``d (n, 2)`` and ``S (n, 2, 2)`` or ``(2, 2)``, 2x2 written out."""
-    S = np.broadcast_to(S, (d.shape[0], 2, 2))
-    a, b, c = S[:, 0, 0], S[:, 0, 1], S[:, 1, 1]
+    if S.ndim == 2:  # one matrix for all: its entries as floats
+        (a, b), (_, c) = S.tolist()
+    else:
+        a, b, c = S[:, 0, 0], S[:, 0, 1], S[:, 1, 1]
     det = a * c - b * b
     x, y = d[:, 0], d[:, 1]
     return (c * x * x - 2.0 * b * x * y + a * y * y) / det
 
 
+def _centroid(points: dict[int, tuple[float, ...]], rows: list[int]) -> tuple[float, float]:
+    """The mean of the detections ``rows`` (n ≥ 1; ``points[r]`` starts with row r's x, y),
+    summed in their order on floats: ``z[rows].mean(axis=0)`` to the bit, without numpy's
+    cost for a few rows."""
+    sx = sy = 0.0
+    for r in rows:
+        p = points[r]
+        sx += p[0]
+        sy += p[1]
+    n = len(rows)
+    return sx / n, sy / n
+
+
+def _mean_R(points: dict[int, tuple[float, ...]], rows: list[int]) -> np.ndarray:
+    """The mean of the covariances of the detections ``rows`` (n ≥ 1; ``points[r]`` is row
+    r's ``(x, y, R₀₀, R₀₁, R₁₀, R₁₁)``), summed in their order on floats:
+    ``np.mean(R[rows], axis=0)`` to the bit."""
+    s0 = s1 = s2 = s3 = 0.0
+    for r in rows:
+        _, _, r0, r1, r2, r3 = points[r]
+        s0 += r0
+        s1 += r1
+        s2 += r2
+        s3 += r3
+    n = len(rows)
+    return np.array([[s0 / n, s1 / n], [s2 / n, s3 / n]])
+
+
+def _points(scan: Scan, rows: np.ndarray) -> dict[int, tuple[float, ...]]:
+    """Row ``r`` of the scan → ``(x, y, R₀₀, R₀₁, R₁₀, R₁₁)``, as floats, for the ``rows``."""
+    z = np.take(scan.z, rows, axis=0).tolist()
+    R = np.take(scan.R, rows, axis=0).reshape(-1, 4).tolist()
+    return {r: (*zr, *Rr) for r, zr, Rr in zip(rows.tolist(), z, R, strict=True)}
+
+
+def _hypot(x: float, y: float) -> float:
+    """``np.hypot`` of two floats (not ``math.hypot``, which may round differently)."""
+    return float(np.hypot(x, y))
+
+
 class _PointGates:
-    """The (detection, confirmed individual track) pairs of a scan where the detection lies in
-    the track's 99 % gate, found once per scan (behind the spatial pre-gate of
-    :func:`trackers.association.spatial.pairs_within`) and held as index arrays: ``det`` rows
-    of the scan, ``trk`` indices into the confirmed tracks, ``m`` the squared Mahalanobis
-    distances."""
+    """The confirmed individual tracks of a scan (``rows`` of the view; ``xy``, ``v`` and
+    their covariances ``Pp``, ``Pv``; ``created``) with the 99 % gates in which they keep a
+    detection. ``det``, ``trk``, ``m``: the (detection, track) pairs of the whole scan where
+    the detection lies in the track's gate, as index arrays (rows of the scan, indices into
+    the confirmed tracks) and squared Mahalanobis distances, found on first use (behind the
+    spatial pre-gate of :func:`trackers.association.spatial.pairs_within`);
+    :meth:`theirs` computes only the pairs it needs."""
 
     def __init__(self, view: PointTrackView, scan: Scan) -> None:
         self.rows = np.flatnonzero(view.confirmed)
-        self.xy = view.x[self.rows, :2]
-        self.v = view.x[self.rows, 2:4]
-        self.Pp = view.P[self.rows, :2, :2]
-        self.Pv = view.P[self.rows, 2:4, 2:4]
-        self.created = view.created[self.rows]
+        x = np.take(view.x, self.rows, axis=0)
+        P = np.take(view.P, self.rows, axis=0)
+        self.xy, self.v = x[:, :2], x[:, 2:4]
+        self.Pp, self.Pv = P[:, :2, :2], P[:, 2:4, 2:4]
+        self.created = np.take(view.created, self.rows)
         self.size = scan.size
-        self.det = np.zeros(0, dtype=np.intp)
-        self.trk = np.zeros(0, dtype=np.intp)
-        self.m = np.zeros(0)
-        if not (self.rows.size and scan.size):
-            return
+        self._z, self._R = scan.z, scan.R
+        self._x, self._P = x, P
+
+    @cached_property
+    def _pairs(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        empty = np.zeros(0, dtype=np.intp)
+        if not (self.rows.size and self.size):
+            return empty, empty, np.zeros(0)
         # pre-gate: within each track's gate radius for the widest detection covariance
         radius = np.sqrt(
-            POINT_GATE * (max_eigenvalue_2x2(self.Pp) + float(np.max(max_eigenvalue_2x2(scan.R))))
+            POINT_GATE * (max_eigenvalue_2x2(self.Pp) + float(np.max(max_eigenvalue_2x2(self._R))))
         )
-        trk, det = pairs_within(self.xy, radius, scan.z)
+        trk, det = pairs_within(self.xy, radius, self._z)
         # np.take, not z[det]: several times faster for thousands of rows
         m = _mahalanobis(
-            np.take(scan.z, det, axis=0) - np.take(self.xy, trk, axis=0),
-            np.take(self.Pp, trk, axis=0) + np.take(scan.R, det, axis=0),
+            np.take(self._z, det, axis=0) - np.take(self.xy, trk, axis=0),
+            np.take(self.Pp, trk, axis=0) + np.take(self._R, det, axis=0),
         )
         inside = m <= POINT_GATE
-        self.det, self.trk, self.m = det[inside], trk[inside], m[inside]
+        return det[inside], trk[inside], m[inside]
 
-    def best_of(self, rows: np.ndarray, tracks: np.ndarray) -> np.ndarray:
-        """For each of the confirmed ``tracks`` (a boolean mask over them), the detection of
-        ``rows`` nearest to it in its gate (Mahalanobis), if any: what it would take."""
-        sel = self._select(rows)
-        sel[sel] = tracks[self.trk[sel]]
-        det, trk, m = self.det[sel], self.trk[sel], self.m[sel]
-        if det.size == 0:
-            return det
-        order = np.lexsort((m, trk))
-        first = np.ones(order.size, dtype=bool)
-        first[1:] = trk[order][1:] != trk[order][:-1]
-        return np.unique(det[order[first]])
+    @property
+    def det(self) -> np.ndarray:
+        return self._pairs[0]
 
-    def _select(self, rows: np.ndarray) -> np.ndarray:
-        if self.det.size == 0 or rows.size == 0:
-            return np.zeros(self.det.size, dtype=bool)
-        mask = np.zeros(self.size, dtype=bool)
-        mask[rows] = True
-        return mask[self.det]
+    @property
+    def trk(self) -> np.ndarray:
+        return self._pairs[1]
+
+    @property
+    def m(self) -> np.ndarray:
+        return self._pairs[2]
+
+    @cached_property
+    def _trace_Pp(self) -> np.ndarray:
+        return self._P[:, 0, 0] + self._P[:, 1, 1]
+
+    def theirs(
+        self,
+        rows: list[int],
+        points: dict[int, tuple[float, ...]],
+        centre: tuple[float, float],
+        reach: float,
+        ve: tuple[float, float],
+        Pve_trace: float,
+        spread: float,
+    ) -> set[int]:
+        """What the confirmed tracks not moving with an extended track would take of its
+        detections ``rows`` (ascending, all within ``reach`` of ``centre``; ``points`` as
+        :func:`_points` gives them): for each track whose velocity is more than ``spread``
+        (m/s) from ``ve`` (:func:`_moves_with` with no allowance for uncertainty; ``Pve_trace``
+        the trace of ``ve``'s covariance), the detection nearest to it in its gate
+        (Mahalanobis; of equally near ones the first), if any. Only the tracks whose gate can
+        reach that far are looked at (``d² ≤ χ² λ_max(Pp + R) ≤ χ² (tr Pp + tr R)``), on
+        floats, operation for operation as the array formulas."""
+        if not (rows and self.rows.size):
+            return set()
+        widest = max(points[r][2] + points[r][5] for r in rows)
+        gate = np.sqrt(POINT_GATE * (self._trace_Pp + widest)) * (1.0 + 1e-9) + 1e-9
+        r = gate + reach
+        dx, dy = self.xy[:, 0] - centre[0], self.xy[:, 1] - centre[1]
+        ks = np.flatnonzero(dx * dx + dy * dy <= r * r)
+        if ks.size == 0:
+            return set()
+        x = np.take(self._x, ks, axis=0)[:, :4].tolist()
+        P = np.take(self._P, ks, axis=0)[:, :4, :4].reshape(-1, 16).tolist()
+        gate = np.take(gate, ks).tolist()
+        out: set[int] = set()
+        for (x0, x1, vx, vy), p, g in zip(x, P, gate, strict=True):
+            sd = math.sqrt(0.5 * ((p[10] + p[15]) + Pve_trace))
+            if _hypot(vx - ve[0], vy - ve[1]) <= spread + 0.0 * sd:
+                continue  # moves with it
+            pa, pb, pc = p[0], p[1], p[5]
+            best, best_m = -1, POINT_GATE
+            for row in rows:
+                zx, zy, ra, rb, _, rc = points[row]
+                ex, ey = zx - x0, zy - x1
+                if ex * ex + ey * ey > g * g:
+                    continue  # beyond its gate
+                a, b, c = pa + ra, pb + rb, pc + rc
+                m = (c * ex * ex - 2.0 * b * ex * ey + a * ey * ey) / (a * c - b * b)
+                if m < best_m or (best < 0 and m == best_m):
+                    best, best_m = row, m
+            if best >= 0:
+                out.add(best)
+        return out
 
 
 def _moves_with(
@@ -384,88 +499,49 @@ class ExtendedTracker:
                 gates = _PointGates(view, scan)
             return gates
 
+        # One k-d tree of the scan, if there are tracks: the detections near each track, and
+        # the births' pairs.
         tree = cKDTree(scan.z) if scan.size and state.tracks else None
-        R_all = scan.R
+        R_mean = np.mean(scan.R, axis=0) if tree is not None else None
         kept: list[ExtendedTrack] = []
         spawned: list[ExtendedTrack] = []
         deleted: list[str] = []
-        cells: list[ResolutionCell] = []
-        take: set[str] = set()
         for track in state.tracks:
             dt = max(0.0, t - track.time)
             est = predict(track.estimate, dt, cfg.q, cfg.tau)
-            c, v = est.x[:2], est.x[2:4]
-            rows = np.zeros(0, dtype=np.intp)
-            subsets: list[np.ndarray] = []
+            subsets: list[list[int]] = []
+            points: dict[int, tuple[float, ...]] = {}
             if tree is not None:
-                G = gate_covariance(est, np.mean(R_all, axis=0), cfg.z_scale)
-                radius = math.sqrt(cfg.gate_threshold * float(np.linalg.eigvalsh(G)[-1]))
-                near = np.asarray(
-                    tree.query_ball_point(c, 1.5 * radius + cfg.resolution_distance),
-                    dtype=np.intp,
-                )
-                rows = near[~claimed[near]]
-            if rows.size:  # the detection of each individual target not moving with it
-                pg = point_gates()
-                if pg.det.size:
-                    apart = ~_moves_with(
-                        pg.v, pg.Pv, v, est.P[2:4, 2:4], cfg.group_speed_spread, 0.0
-                    )
-                    theirs = pg.best_of(rows, apart)
-                    rows = np.setdiff1d(rows, theirs, assume_unique=True)
-            if rows.size:  # the subsets with a detection in the gate, whole (a bending column)
-                Gj = G - np.mean(R_all, axis=0) + R_all[rows]
-                gated = _mahalanobis(scan.z[rows] - c, Gj) <= cfg.gate_threshold
-                subsets = [
-                    rows[s]
-                    for s in resolution_subsets(scan.z[rows], cfg.resolution_distance)
-                    if gated[s].any()
-                ]
-                rows = np.sort(np.concatenate(subsets)) if subsets else rows[:0]
-            chosen = np.zeros(0, dtype=np.intp)
-            parts: list[np.ndarray] = []
-            left_out: list[np.ndarray] = []
-            gain = -track.gamma  # ΔL(∅)
-            if rows.size:
-                subsets = [np.searchsorted(rows, s) for s in subsets]  # as positions in rows
-                G1 = gate_covariance(est, np.mean(R_all[rows], axis=0), cfg.z_scale)
-                fit = []
-                for s in subsets:
-                    d = scan.z[rows[s]].mean(axis=0) - c
-                    fit.append(float(_mahalanobis(d[None], G1 / max(1, s.size) ** 0.5)[0]))
-                best = None
-                for cand in nested_unions(subsets, np.asarray(fit)):
-                    W = rows[cand]
-                    Rm = np.mean(R_all[W], axis=0)
-                    g = (
-                        _log_poisson(W.size, track.gamma)
-                        + subset_log_likelihood(
-                            est, scan.z[W], Rm, cfg.z_scale, extent_uncertain=True
-                        )
-                        - W.size * log_lam
-                    )
-                    if g > gain:
-                        gain, best = g, cand
-                if best is not None:
-                    chosen = rows[best]
-                    in_best = np.zeros(rows.size, dtype=bool)
-                    in_best[best] = True
-                    parts = [rows[s] for s in subsets if in_best[s].any()]
-                    left_out = [rows[s] for s in subsets if not in_best[s].any() and s.size >= 2]
-            score = track.score + gain
-            evidence, split_rows, split_c, split_d, split_v = _split_evidence(
-                track, scan, parts, left_out, t, cfg
+                subsets, points = _gated_subsets(est, scan, tree, R_mean, claimed, point_gates, cfg)
+            gain, chosen, parts, left_out, fitted = _likeliest(
+                track, est, scan, subsets, points, cfg, log_lam
             )
+            score = track.score + gain
+            evidence, split, split_c, split_d, split_v = _split_evidence(
+                track, points, parts, left_out, t, cfg
+            )
+            split_rows = np.array(split, dtype=np.intp)
             splitting = evidence >= SPLIT_SCANS and not claimed[split_rows].any()
             if splitting:  # the parent keeps the rest, its extent fitted to it afresh
-                chosen = np.setdiff1d(chosen, split_rows, assume_unique=True)
-                if chosen.size:
-                    est = replace(est, X=_spread(scan, chosen, cfg)[2], alpha=2.0 + chosen.size)
-            n = int(chosen.size)
+                leaving = set(split)
+                chosen = [r for r in chosen if r not in leaving]
+                fitted = None
+                if chosen:
+                    est = replace(
+                        est,
+                        X=_spread(scan, np.array(chosen, dtype=np.intp), cfg)[2],
+                        alpha=2.0 + len(chosen),
+                    )
+            n = len(chosen)
             gamma = max(MIN_GAMMA, track.gamma + GAMMA_GAIN * (n - track.gamma))
+            chosen = np.array(chosen, dtype=np.intp)
             if n:
                 claimed[chosen] = True
-                est = update(est, scan.z[chosen], np.mean(R_all[chosen], axis=0), cfg.z_scale)
+                if fitted is None:
+                    R_chosen = np.mean(np.take(scan.R, chosen, axis=0), axis=0)
+                    est = update(est, np.take(scan.z, chosen, axis=0), R_chosen, cfg.z_scale)
+                else:  # the union's own: its mean R and moments, found when it was scored
+                    est = update_moments(est, fitted[1], fitted[0], cfg.z_scale)
             new = ExtendedTrack(
                 id=track.id,
                 estimate=est,
@@ -507,72 +583,27 @@ class ExtendedTracker:
                 continue
             kept.append(new)
         kept, merged = _merge(kept + spawned, cfg)
-        spawned = []
         deleted.extend(merged)
-        # Hybridization: resolution cells and absorbed individual tracks.
-        before, seen = dict(state.absorbing), {}
         step = t - state.time if state.time is not None and t > state.time else 0.0
-        if len(view):
-            xy, vel = view.x[:, :2], view.x[:, 2:4]
-            live = set(view.ids)
-            for pos, track in enumerate(kept):
-                est = track.estimate
-                d = xy - est.x[:2]
-                cell = _grown(est.X, 0.5 * cfg.resolution_distance)
-                in_cell = _mahalanobis(d, cell) <= 1.0
-                # visitors: individual tracks seen near it but outside its cell (a vehicle
-                # coming up to it), which never count as started by its own detections
-                watch = _grown(est.X, 0.5 * cfg.resolution_distance + cfg.max_speed * step)
-                near_out = (_mahalanobis(d, watch) <= 1.0) & ~in_cell
-                visitors = frozenset(v for v in track.visitors if v in live) | {
-                    view.ids[i] for i in np.flatnonzero(near_out).tolist()
-                }
-                if visitors != track.visitors:
-                    kept[pos] = track = replace(track, visitors=visitors)
-                if not track.confirmed:
-                    continue
-                established = track.hits >= cfg.birth_scans and t - track.created >= BIRTH_MIN_SPAN
-                cells.append(ResolutionCell(center=est.x[:2], matrix=cell, pd=cfg.in_cell_pd))
-                # tracks that its own detections started since its cluster was first seen:
-                # in its cell, never seen coming, no faster than a group
-                own = (
-                    in_cell
-                    & (view.created >= track.origin)
-                    & (np.hypot(vel[:, 0], vel[:, 1]) <= cfg.max_speed)
-                )
-                take.update(
-                    view.ids[i] for i in np.flatnonzero(own).tolist() if view.ids[i] not in visitors
-                )
-                inside = (_mahalanobis(d, est.X) <= 1.0) & ~np.isin(view.ids, list(take))
-                idx = np.flatnonzero(inside)
-                if established and idx.size:
-                    # a confirmed track must move with it within the spread itself, for
-                    # ABSORB_SCANS scans in a row; a tentative one within its uncertainty too
-                    sigmas = np.where(view.confirmed[idx], 0.0, 1.0)
-                    moving = _moves_with(
-                        vel[idx],
-                        view.P[idx, 2:4, 2:4],
-                        est.x[2:4],
-                        est.P[2:4, 2:4],
-                        cfg.group_speed_spread,
-                        sigmas,
-                    )
-                    for i in idx[moving].tolist():
-                        tid = view.ids[i]
-                        if not view.confirmed[i]:
-                            take.add(tid)
-                        else:
-                            seen[tid] = before.get(tid, 0) + 1
-                            if seen[tid] >= ABSORB_SCANS:
-                                take.add(tid)
+        kept, cells, take, seen = _hybridize(kept, view, dict(state.absorbing), step, t, cfg)
         absorbed = tuple(sorted(take))
-        index = view.index()
-        gone = tuple(tid for tid in absorbed if view.confirmed[index[tid]])
+        if absorbed:
+            index = view.index()
+            gone = tuple(tid for tid in absorbed if view.confirmed[index[tid]])
+        else:
+            gone = ()
         # Births from clusters no extended track explains.
-        born, candidates, next_id = self._births(scan, claimed, point_gates, state, next_id, t)
+        pairs = (
+            None
+            if tree is None
+            else tree.query_pairs(cfg.resolution_distance, output_type="ndarray")
+        )
+        born, candidates, next_id = self._births(
+            scan, claimed, pairs, point_gates, state, next_id, t
+        )
         for _, rows in born:
             claimed[rows] = True
-        tracks = tuple(kept) + tuple(spawned) + tuple(track for track, _ in born)
+        tracks = tuple(kept) + tuple(track for track, _ in born)
         new_state = replace(
             state,
             tracks=tracks,
@@ -583,7 +614,7 @@ class ExtendedTracker:
         )
         return PeerProposal(
             claimed=claimed,
-            cells=tuple(cells),
+            cells=cells,
             take=absorbed,
             tracks=tuple(_snapshot(tr, t) for tr in tracks),
             deleted=tuple(deleted) + gone,
@@ -592,15 +623,26 @@ class ExtendedTracker:
 
     # -- births --------------------------------------------------------------------------------
 
-    def _births(self, scan, claimed, point_gates, state, next_id, t):
+    def _births(self, scan, claimed, pairs, point_gates, state, next_id, t):
+        """New tracks from the clusters of the unclaimed detections; ``pairs`` the pairs of the
+        scan's detections closer than the resolution distance (from the k-d tree the tracks
+        used), if known."""
         cfg, tm = state.config, state.management
-        free = np.flatnonzero(~claimed)
-        clusters = [
-            free[s]
-            for s in resolution_subsets(
-                np.take(scan.z, free, axis=0), cfg.resolution_distance, cfg.min_detections
+        if pairs is None:
+            free = np.flatnonzero(~claimed)
+            clusters = [
+                free[s]
+                for s in resolution_subsets(
+                    np.take(scan.z, free, axis=0), cfg.resolution_distance, cfg.min_detections
+                )
+            ]
+        else:  # the same subsets (min_detections ≥ 2) from the pairs of free detections
+            free = ~claimed
+            i, j = pairs[:, 0], pairs[:, 1]
+            both = np.flatnonzero(free[i] & free[j])
+            clusters = pair_subsets(
+                scan.size, np.take(i, both), np.take(j, both), max(2, cfg.min_detections)
             )
-        ]
         if clusters:  # centroids in one pass: (Σ z over each cluster) / its size
             sizes = np.array([r.size for r in clusters])
             starts = np.cumsum(sizes) - sizes
@@ -722,14 +764,210 @@ def _group_clusters(
     return [rows[~drop[rows]] for rows in clusters]
 
 
-def _split_evidence(
-    track: ExtendedTrack,
+def _gated_subsets(
+    est: ExtendedEstimate,
     scan: Scan,
-    parts: list[np.ndarray],
-    left_out: list[np.ndarray],
+    tree: cKDTree,
+    R_mean: np.ndarray,
+    claimed: np.ndarray,
+    point_gates: Callable[[], _PointGates],
+    cfg: ExtendedConfig,
+) -> tuple[list[list[int]], dict[int, tuple[float, ...]]]:
+    """The detections a track predicted to ``est`` may take, as resolution subsets (rows of
+    the scan, in the k-d tree's order): of the unclaimed detections near it, less the one
+    nearest to each confirmed individual track not moving with it (velocities more than
+    ``group_speed_spread`` apart), the subsets with a detection in its gate
+    ``(yⱼ − H x)ᵀ (H P Hᵀ + z X + Rⱼ)⁻¹ (yⱼ − H x) ≤ gate_threshold``, whole (a bending
+    column). Near: within 1.5 times the radius of the gate with the scan's mean ``R̄`` plus a
+    resolution distance. Also returns the near detections as :func:`_points` gives them."""
+    ga, gb, gc = innovation_entries(est, 1, R_mean, cfg.z_scale)  # H P Hᵀ + z X + R̄
+    radius = math.sqrt(cfg.gate_threshold * (0.5 * (ga + gc) + _hypot(0.5 * (ga - gc), gb)))
+    c0, c1, v0, v1 = est.x.tolist()
+    reach = 1.5 * radius + cfg.resolution_distance
+    near = np.asarray(tree.query_ball_point((c0, c1), reach), dtype=np.intp)
+    near = near[~claimed[near]]
+    if near.size == 0:
+        return [], {}
+    points = _points(scan, near)
+    rows = near.tolist()
+    (pa, _), (_, pc) = est.P[2:4, 2:4].tolist()
+    theirs = point_gates().theirs(
+        sorted(rows), points, (c0, c1), reach, (v0, v1), pa + pc, cfg.group_speed_spread
+    )
+    if theirs:
+        rows = [r for r in rows if r not in theirs]
+    (r00, r01), (_, r11) = R_mean.tolist()
+    ha, hb, hc = ga - r00, gb - r01, gc - r11  # the gate less R̄, to which each Rⱼ is added
+    gated = []
+    for r in rows:
+        x, y, ra, rb, _, rc = points[r]
+        x, y = x - c0, y - c1
+        a, b, c = ha + ra, hb + rb, hc + rc
+        gated.append(
+            (c * x * x - 2.0 * b * x * y + a * y * y) / (a * c - b * b) <= cfg.gate_threshold
+        )
+    subsets = point_subsets([points[r][:2] for r in rows], cfg.resolution_distance)
+    return [[rows[k] for k in s] for s in subsets if any(gated[k] for k in s)], points
+
+
+def _likeliest(
+    track: ExtendedTrack,
+    est: ExtendedEstimate,
+    scan: Scan,
+    subsets: list[list[int]],
+    points: dict[int, tuple[float, ...]],
+    cfg: ExtendedConfig,
+    log_lam: float,
+) -> tuple[float, list[int], list[list[int]], list[list[int]], tuple[np.ndarray, Moments] | None]:
+    """The likeliest of the nested unions of ``subsets`` (ranked by the Mahalanobis distance
+    of each subset's centroid to the predicted one, under ``H P Hᵀ + z X + R̄`` over the
+    square root of the subset's size, ``R̄`` the mean over all the subsets) and of no
+    detection at all, by
+
+        ΔL(W) = ln Poisson(|W|; γ) + ln f(W) − |W| ln λ_fa,    ΔL(∅) = −γ.
+
+    Returns ``ΔL``, the union's rows (ascending), the subsets in it and the subsets of at
+    least two detections left out of it, and its mean ``R`` and :func:`moments` (None for
+    no detection)."""
+    gain = -track.gamma  # ΔL(∅)
+    if not subsets:
+        return gain, [], [], [], None
+    rows = sorted(r for s in subsets for r in s)
+    G1 = innovation_entries(est, 1, _mean_R(points, rows), cfg.z_scale)
+    c0, c1 = est.x[:2].tolist()
+    fit = []
+    for s in subsets:
+        mx, my = _centroid(points, s)
+        x, y = mx - c0, my - c1
+        root = max(1, len(s)) ** 0.5
+        a, b, c = (g / root for g in G1)
+        fit.append((c * x * x - 2.0 * b * x * y + a * y * y) / (a * c - b * b))
+    best, chosen, R_best, mom_best = -1, [], None, None
+    union: list[int] = []
+    order = sorted(range(len(subsets)), key=fit.__getitem__)
+    for k, s in enumerate(order):
+        union.extend(subsets[s])
+        W = sorted(union)
+        Rm = _mean_R(points, W)
+        mom = moments(np.take(scan.z, W, axis=0))
+        g = (
+            _log_poisson(len(W), track.gamma)
+            + moments_log_likelihood(est, mom, Rm, cfg.z_scale, extent_uncertain=True)
+            - len(W) * log_lam
+        )
+        if g > gain:
+            gain, best, chosen, R_best, mom_best = g, k, W, Rm, mom
+    if best < 0:
+        return gain, [], [], [], None
+    in_best = set(order[: best + 1])
+    parts = [s for k, s in enumerate(subsets) if k in in_best]
+    left_out = [s for k, s in enumerate(subsets) if k not in in_best and len(s) >= 2]
+    return gain, chosen, parts, left_out, (R_best, mom_best)
+
+
+def _hybridize(
+    tracks: list[ExtendedTrack],
+    view: PointTrackView,
+    before: dict[str, int],
+    step: float,
     t: float,
     cfg: ExtendedConfig,
-) -> tuple[int, np.ndarray, tuple[float, float], float, np.ndarray]:
+) -> tuple[list[ExtendedTrack], tuple[ResolutionCell, ...], set[str], dict[str, int]]:
+    """Resolution cells and absorbed individual tracks (module docstring, step 5). Returns
+    the tracks (their visitors brought up to date), the cells of the confirmed ones, the ids
+    of the individual tracks to take, and the confirmed ones seen moving with an extent
+    (scans in a row; ``before``: as of the last scan)."""
+    cells: list[ResolutionCell] = []
+    take: set[str] = set()
+    seen: dict[str, int] = {}
+    if not len(view) or not tracks:
+        return tracks, (), take, seen
+    tracks = list(tracks)
+    ids = view.ids
+    live: set[str] | None = None
+    half = 0.5 * cfg.resolution_distance
+    spread, max_speed = cfg.group_speed_spread, cfg.max_speed
+    for pos, track in enumerate(tracks):
+        est = track.estimate
+        cx, cy, ex, ey = est.x.tolist()
+        cell, watch = _grown(est.X, half, half + max_speed * step)
+        (ca, cb), (_, cc) = cell.tolist()
+        (wa, wb), (_, wc) = watch.tolist()
+        (xa, xb), (_, xc) = est.X.tolist()
+        # Only the individual tracks within the largest ellipse's major semi-axis (a little
+        # more, for rounding; √(tr X) bounds X's) can be inside any of them: the others are
+        # never looked at. On floats, operation for operation as the array formulas.
+        reach = (math.sqrt(xa + xc) + half + max_speed * step) * (1.0 + 1e-6) + 1e-6
+        near = _near_rows(view, cx, cy, reach)
+        in_cell, near_out, inside = [], [], []
+        for i, (x, y) in zip(near, np.take(view.x[:, :2], near, axis=0).tolist(), strict=True):
+            x, y = x - cx, y - cy
+            if (cc * x * x - 2.0 * cb * x * y + ca * y * y) / (ca * cc - cb * cb) <= 1.0:
+                in_cell.append(i)
+            elif (wc * x * x - 2.0 * wb * x * y + wa * y * y) / (wa * wc - wb * wb) <= 1.0:
+                # a visitor: an individual track seen near it but outside its cell (a vehicle
+                # coming up to it), which never counts as started by its own detections
+                near_out.append(i)
+            if (xc * x * x - 2.0 * xb * x * y + xa * y * y) / (xa * xc - xb * xb) <= 1.0:
+                inside.append(i)
+        visitors = track.visitors
+        if visitors:
+            live = set(ids) if live is None else live
+            visitors = frozenset(v for v in visitors if v in live)
+        visitors = visitors | {ids[i] for i in near_out}
+        if visitors != track.visitors:
+            tracks[pos] = track = replace(track, visitors=visitors)
+        if not track.confirmed:
+            continue
+        established = track.hits >= cfg.birth_scans and t - track.created >= BIRTH_MIN_SPAN
+        cells.append(ResolutionCell(center=est.x[:2], matrix=cell, pd=cfg.in_cell_pd))
+        # tracks that its own detections started since its cluster was first seen:
+        # in its cell, never seen coming, no faster than a group
+        for i in in_cell:
+            if (
+                view.created[i] >= track.origin
+                and _hypot(view.x[i, 2], view.x[i, 3]) <= max_speed
+                and ids[i] not in visitors
+            ):
+                take.add(ids[i])
+        if not established:
+            continue
+        # a confirmed track must move with it within the spread itself, for ABSORB_SCANS
+        # scans in a row; a tentative one within its uncertainty too (:func:`_moves_with`)
+        (pa, _), (_, pc) = est.P[2:4, 2:4].tolist()
+        for i in inside:
+            tid = ids[i]
+            if tid in take:
+                continue
+            confirmed = bool(view.confirmed[i])
+            vx, vy = view.x[i, 2:4].tolist()
+            sd = math.sqrt(0.5 * (float(view.P[i, 2, 2] + view.P[i, 3, 3]) + (pa + pc)))
+            if not _hypot(vx - ex, vy - ey) <= spread + (0.0 if confirmed else 1.0) * sd:
+                continue
+            if not confirmed:
+                take.add(tid)
+            else:
+                seen[tid] = before.get(tid, 0) + 1
+                if seen[tid] >= ABSORB_SCANS:
+                    take.add(tid)
+    return tracks, tuple(cells), take, seen
+
+
+def _near_rows(view: PointTrackView, cx: float, cy: float, reach: float) -> list[int]:
+    """The rows of the view whose predicted position is within ``reach`` of ``(cx, cy)``."""
+    xy = view.x[:, :2]
+    dx, dy = xy[:, 0] - cx, xy[:, 1] - cy
+    return np.flatnonzero(dx * dx + dy * dy <= reach * reach).tolist()
+
+
+def _split_evidence(
+    track: ExtendedTrack,
+    points: dict[int, tuple[float, ...]],
+    parts: list[list[int]],
+    left_out: list[list[int]],
+    t: float,
+    cfg: ExtendedConfig,
+) -> tuple[int, list[int], tuple[float, float], float, np.ndarray]:
     """The split evidence after this scan (paper 002: an extent that grows because its
     detections fall apart into separated subsets is a group separating). The *main* part is
     the largest subset of the track's chosen detections ``parts``; of the other subsets of at
@@ -740,44 +978,50 @@ def _split_evidence(
     ``group_speed_spread``, and half a resolution distance of jitter): a group moving away; a
     gap that a missed vehicle
     leaves in a column closes again, and a column bending round a corner stays one subset).
+    Subsets are lists of rows of the scan, ``points`` their detections (:func:`_points`).
     Returns the evidence, the subset's rows, its centroid, the gap and its velocity from the two
     scans."""
-    none = (0, np.zeros(0, dtype=np.intp), (0.0, 0.0), 0.0, np.zeros(2))
+    none = (0, [], (0.0, 0.0), 0.0, np.zeros(2))
     if not parts:
         return none
     velocity = track.estimate.x[2:4].copy()
     dt = t - track.split_time
     # a group driving off keeps about the parent's speed
-    reach = float(np.hypot(*velocity)) + 2.0 * cfg.group_speed_spread
+    reach = _hypot(*velocity.tolist()) + 2.0 * cfg.group_speed_spread
     everyone = parts + left_out
-    centroid = {id(r): scan.z[r].mean(axis=0) for r in everyone}
+    centroid = {id(r): _centroid(points, r) for r in everyone}
+
+    def apart(r: list[int], c: tuple[float, float]) -> float:
+        """Distance from the centroid of ``r`` to ``c``."""
+        cr = centroid[id(r)]
+        return _hypot(cr[0] - c[0], cr[1] - c[1])
+
     if track.split_evidence and dt > 0:  # the subset that was separating, if it still is
-        prev = np.asarray(track.split_centroid)
+        prev = track.split_centroid
         near = [
             r
             for r in everyone
-            if r.size >= 2
-            and np.hypot(*(centroid[id(r)] - prev)) <= 0.5 * cfg.resolution_distance + reach * dt
+            if len(r) >= 2 and apart(r, prev) <= 0.5 * cfg.resolution_distance + reach * dt
         ]
         if near:
-            rows = min(near, key=lambda r: float(np.hypot(*(centroid[id(r)] - prev))))
+            rows = min(near, key=lambda r: apart(r, prev))
             rest = [r for r in parts if r is not rows]
             if rest:
-                main = max(rest, key=lambda r: r.size)
+                main = max(rest, key=len)
                 cs = centroid[id(rows)]
-                gap = float(np.hypot(*(cs - centroid[id(main)])))
+                gap = apart(main, cs)
                 if gap > track.split_gap:
                     evidence = track.split_evidence + 1
-                    return evidence, rows, (float(cs[0]), float(cs[1])), gap, (cs - prev) / dt
-    main = max(parts, key=lambda r: r.size)
-    others = [r for r in everyone if r is not main and r.size >= 2]
+                    v = np.array([(cs[0] - prev[0]) / dt, (cs[1] - prev[1]) / dt])
+                    return evidence, rows, cs, gap, v
+    main = max(parts, key=len)
+    others = [r for r in everyone if r is not main and len(r) >= 2]
     if not others:
         return none
     c_main = centroid[id(main)]
-    rows = max(others, key=lambda r: float(np.hypot(*(centroid[id(r)] - c_main))))
+    rows = max(others, key=lambda r: apart(r, c_main))
     cs = centroid[id(rows)]
-    gap = float(np.hypot(*(cs - c_main)))
-    return 1, rows, (float(cs[0]), float(cs[1])), gap, velocity
+    return 1, rows, cs, apart(rows, c_main), velocity
 
 
 def _spread(
@@ -821,7 +1065,7 @@ def _merge(
             ta, tb = tracks[a], tracks[b]
             ea, eb = ta.estimate, tb.estimate
             d = eb.x[:2] - ea.x[:2]
-            if _mahalanobis(d[None], _grown(ea.X, 0.5 * cfg.resolution_distance))[0] > 1.0:
+            if _mahalanobis(d[None], _grown(ea.X, 0.5 * cfg.resolution_distance)[0])[0] > 1.0:
                 continue
             if _moves_with(
                 eb.x[None, 2:4],
