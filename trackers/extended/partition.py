@@ -79,10 +79,7 @@ def pair_subsets(n: int, i: np.ndarray, j: np.ndarray, min_size: int = 1) -> lis
                 groups.setdefault(r, []).append(a)
             big = sorted(sorted(g) for g in groups.values() if len(g) >= min_size)
             return [np.array(g, dtype=np.intp) for g in big]
-        # a component's root is its smallest node, so the groups come in order of it
-        for a in range(n):
-            groups.setdefault(roots.get(a, a), []).append(a)
-        return [np.array(g, dtype=np.intp) for g in groups.values()]
+        return [np.array(g, dtype=np.intp) for g in _components(n, roots)]
     labels = component_labels(n, i, j)
     counts = np.bincount(labels, minlength=n)
     if min_size > 1:
@@ -170,14 +167,8 @@ def point_subsets(points: list[tuple[float, float]], d_res: float) -> list[list[
     if not (math.isfinite(d_res) and d_res > 0):
         raise ValueError(f"d_res: must be a finite number > 0, got {d_res!r}")
     d2 = float(d_res) ** 2
-    parent = list(range(n))
-
-    def root(a: int) -> int:
-        while parent[a] != a:
-            parent[a] = parent[parent[a]]
-            a = parent[a]
-        return a
-
+    ei: list[int] = []
+    ej: list[int] = []
     by_x = sorted(range(n), key=lambda k: points[k][0])
     for p, a in enumerate(by_x):
         xa, ya = points[a]
@@ -188,12 +179,16 @@ def point_subsets(points: list[tuple[float, float]], d_res: float) -> list[list[
                 break
             dy = ya - yb
             if dx * dx + dy * dy <= d2:
-                ra, rb = root(a), root(b)
-                if ra < rb:
-                    parent[rb] = ra
-                elif rb < ra:
-                    parent[ra] = rb
+                ei.append(a)
+                ej.append(b)
+    return _components(n, _roots(ei, ej))
+
+
+def _components(n: int, roots: dict[int, int]) -> list[list[int]]:
+    """The nodes ``0 … n − 1`` grouped by their ``roots`` (:func:`_roots`; a node without an
+    edge is alone), ascending within a group; a component's root is its smallest node, so
+    the groups come in order of it."""
     groups: dict[int, list[int]] = {}
-    for a in range(n):  # a component's root is its smallest node: groups in order of it
-        groups.setdefault(root(a), []).append(a)
+    for a in range(n):
+        groups.setdefault(roots.get(a, a), []).append(a)
     return list(groups.values())

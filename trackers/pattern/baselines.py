@@ -22,7 +22,7 @@ import math
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
-from trackers.pattern.fppm import PatternMatch, chi2_threshold, pattern_match
+from trackers.pattern.fppm import PatternMatch, checked_points, chi2_threshold, pattern_match
 
 __all__ = ["match_ransac", "match_vote", "ransac_iterations"]
 
@@ -37,14 +37,7 @@ _FAR = 1e30
 def _check(
     pattern: np.ndarray, detections: np.ndarray, sigma: float
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    P = np.asarray(pattern, dtype=float)
-    Q = np.asarray(detections, dtype=float)
-    if P.ndim != 2 or P.shape[1] != 2 or Q.ndim != 2 or Q.shape[1] != 2:
-        raise ValueError(f"pattern, detections: must be (m, 2), (n, 2), got {P.shape}, {Q.shape}")
-    if not (np.isfinite(P).all() and np.isfinite(Q).all()):
-        raise ValueError("pattern, detections: must be finite")
-    if not (math.isfinite(sigma) and sigma > 0):
-        raise ValueError(f"sigma: must be a finite number > 0, got {sigma!r}")
+    P, Q = checked_points(pattern, detections, sigma)
     return P, Q, P[:, 0] + 1j * P[:, 1], Q[:, 0] + 1j * Q[:, 1]
 
 

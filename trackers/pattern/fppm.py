@@ -78,6 +78,7 @@ from trackers.pattern.registration import Similarity, fit_similarity
 
 __all__ = [
     "PatternMatch",
+    "checked_points",
     "chi2_threshold",
     "match_fppm",
     "pattern_match",
@@ -414,6 +415,23 @@ def _grow(
     return asg, np.where(alive, p, 0).astype(np.intp), np.maximum(rss, 0.0) / p
 
 
+def checked_points(
+    pattern: np.ndarray, detections: np.ndarray, sigma: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """``pattern (m, 2)`` and ``detections (n, 2)`` as float arrays, after checking their
+    shapes, that they are finite, and that the noise ``sigma`` is a finite number > 0: the
+    inputs every matcher takes. Raises ``ValueError`` naming what is wrong."""
+    P = np.asarray(pattern, dtype=float)
+    Q = np.asarray(detections, dtype=float)
+    if P.ndim != 2 or P.shape[1] != 2 or Q.ndim != 2 or Q.shape[1] != 2:
+        raise ValueError(f"pattern, detections: must be (m, 2), (n, 2), got {P.shape}, {Q.shape}")
+    if not (np.isfinite(P).all() and np.isfinite(Q).all()):
+        raise ValueError("pattern, detections: must be finite")
+    if not (math.isfinite(sigma) and sigma > 0):
+        raise ValueError(f"sigma: must be a finite number > 0, got {sigma!r}")
+    return P, Q
+
+
 def match_fppm(
     pattern: np.ndarray,
     detections: np.ndarray,
@@ -437,14 +455,7 @@ def match_fppm(
     Returns ``None`` when no matching has support ``w ≥ w_min``. Algorithm and departures from
     the paper: see the module docstring.
     """
-    P = np.asarray(pattern, dtype=float)
-    Q = np.asarray(detections, dtype=float)
-    if P.ndim != 2 or P.shape[1] != 2 or Q.ndim != 2 or Q.shape[1] != 2:
-        raise ValueError(f"pattern, detections: must be (m, 2), (n, 2), got {P.shape}, {Q.shape}")
-    if not (np.isfinite(P).all() and np.isfinite(Q).all()):
-        raise ValueError("pattern, detections: must be finite")
-    if not (math.isfinite(sigma) and sigma > 0):
-        raise ValueError(f"sigma: must be a finite number > 0, got {sigma!r}")
+    P, Q = checked_points(pattern, detections, sigma)
     if int(w_min) != w_min or w_min < 2:
         raise ValueError(f"w_min: must be an integer >= 2, got {w_min!r}")
     w_min = int(w_min)
