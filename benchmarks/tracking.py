@@ -47,14 +47,18 @@ FIRST_SCORED_SCAN = 10
 CONTINUITY_GATE = 25.0  # m: 5 σ of the reference sensor; a track farther off follows nothing
 
 
+def reference_overrides(scenario: ScenarioConfig) -> dict[str, dict[str, float]]:
+    """The settings that give our tracker Stone Soup's model of a scenario: its motion noise
+    and prior velocity spread."""
+    return {
+        "motion": {"q_cv": scenario.q},
+        "initiation": {"velocity_std": 2.0 * scenario.init_velocity_std},
+    }
+
+
 def reference_config(scenario: ScenarioConfig) -> TrackerConfig:
-    """Our tracker set up for a scenario: its motion noise and prior velocity spread."""
-    return TrackerConfig().merged(
-        {
-            "motion": {"q_cv": scenario.q},
-            "initiation": {"velocity_std": 2.0 * scenario.init_velocity_std},
-        }
-    )
+    """Our tracker set up for a scenario (:func:`reference_overrides`)."""
+    return TrackerConfig().merged(reference_overrides(scenario))
 
 
 @dataclass

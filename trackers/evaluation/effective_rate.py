@@ -10,6 +10,13 @@ target are *false* at that scan (duplicates of a held target included). Scans be
 assignments are, so the first counted scan can be held.
 
     effective tracking rate = held target-scans / target-scans counted
+
+The false tracks are split in two. A false track is *displaced* when it is a target's own
+track gone astray: the target it was last assigned to is within ``displaced_gate`` metres
+and held by no other track at this scan (an aircraft's track coasting through a missed
+detection in a turn, more than ``gate`` off). The others are *spurious*: tracks of clutter,
+duplicates, tracks that follow nothing. ``false_per_scan`` counts both; the track of a real
+target that is more than ``gate`` off also counts as not held in the rate.
 """
 
 from __future__ import annotations
@@ -28,23 +35,35 @@ __all__ = ["EffectiveRate", "EffectiveRateCounter"]
 @dataclass(frozen=True)
 class EffectiveRate:
     """``rate`` overall, ``rate_by_class`` per target class, ``false_per_scan`` (mean number of
-    false confirmed tracks a counted scan) and ``scans`` counted."""
+    false confirmed tracks a counted scan), of which ``displaced_per_scan`` were targets' own
+    tracks more than the gate off, and ``scans`` counted."""
 
     rate: float
     rate_by_class: dict[str, float]
     false_per_scan: float
     scans: int
+    displaced_per_scan: float = 0.0
+
+    @property
+    def spurious_per_scan(self) -> float:
+        """False tracks a scan that are not a target's own track gone astray."""
+        return self.false_per_scan - self.displaced_per_scan
 
 
 class EffectiveRateCounter:
-    def __init__(self, gate: float = 150.0, warmup: int = 8) -> None:
+    def __init__(
+        self, gate: float = 150.0, warmup: int = 8, displaced_gate: float = 1000.0
+    ) -> None:
         self.gate = float(gate)
         self.warmup = int(warmup)
+        self.displaced_gate = float(displaced_gate)
         self._scan = 0
         self._previous: dict[int, str] = {}
+        self._last_target: dict[str, int] = {}  # track → the target it was last assigned to
         self._held: dict[int, int] = defaultdict(int)
         self._seen: dict[int, int] = defaultdict(int)
         self._false = 0
+        self._displaced = 0
 
     def add(
         self,
@@ -85,6 +104,19 @@ class EffectiveRateCounter:
                 if tid is not None and self._previous.get(target) == tid:
                     self._held[target] += 1
             self._false += len(track_ids) - len(used_tracks)
+            row_of = {target: i for i, target in enumerate(truth_ids)}
+            for j, tid in enumerate(track_ids):
+                target = self._last_target.get(tid)
+                i = row_of.get(target) if target is not None else None
+                if (
+                    j not in used_tracks
+                    and i is not None
+                    and target not in current
+                    and np.hypot(*(X[i] - Y[j])) <= self.displaced_gate
+                ):
+                    self._displaced += 1
+        for target, tid in current.items():
+            self._last_target[tid] = target
         self._previous = current
         self._scan += 1
         return current
@@ -104,4 +136,5 @@ class EffectiveRateCounter:
             rate_by_class={k: by_class_held[k] / v for k, v in sorted(by_class_seen.items())},
             false_per_scan=self._false / counted if counted else float("nan"),
             scans=counted,
+            displaced_per_scan=self._displaced / counted if counted else float("nan"),
         )
