@@ -8,9 +8,12 @@ at most ``v_max`` could make in ``Δt = t − t_c``:
 
     e = d − d · min(1, v_max Δt / |d|),      eᵀ (R_c + R_j)⁻¹ e ≤ γ.
 
-A search around each candidate with radius ``v_max Δt + sqrt(γ (λ_max(R_c) + max_j
-λ_max(R_j)))`` (:func:`trackers.association.spatial.pairs_within`, a k-d tree over the free
-detections in large scenes) finds every such pair without forming all pairs of a scan.
+In large problems (more than ``BRUTE_FORCE_CELLS`` candidate-detection pairs) a search around
+each candidate with radius ``v_max Δt + sqrt(γ (λ_max(R_c) + max_j λ_max(R_j)))``, shrunk by
+the score bound of :func:`search_radius` (:func:`trackers.association.spatial.pairs_within`,
+a k-d tree over the free detections in large scenes) finds every such pair without forming
+all pairs of a scan; in small ones every pair is scored, which costs fewer operations, and
+the gate and the score floor reject exactly the pairs the search would not have found.
 
 The velocity prior is a two-component mixture: with weight ``w`` a *slow* target,
 ``v ~ N(0, σ_v² I)``; with weight ``1 − w`` a *fast* one, ``v`` uniform over the disc
@@ -49,8 +52,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from trackers.association.gating import max_eigenvalue_2x2
-from trackers.association.spatial import pairs_within
-from trackers.rows import RowArrays, sort_within_groups
+from trackers.association.spatial import BRUTE_FORCE_CELLS, pairs_within
+from trackers.rows import RowArrays
 
 __all__ = [
     "Candidates",
@@ -114,44 +117,70 @@ class TwoPointTracks:
         return int(self.candidate.size)
 
 
-def _entries(R: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The entries ``(r₀₀, r₀₁, r₁₁)`` of symmetric 2x2 matrices ``R (k, 2, 2)``."""
-    return R[:, 0, 0], R[:, 0, 1], R[:, 1, 1]
+def _no_pairs() -> TwoPointTracks:
+    empty = np.zeros(0, dtype=np.intp)
+    return TwoPointTracks(empty, empty, np.zeros((0, 4)), np.zeros((0, 4, 4)), np.zeros(0))
 
 
-def _component_logliks(
-    d: np.ndarray,
-    s: tuple[np.ndarray, np.ndarray, np.ndarray],
-    dt: np.ndarray,
+#: Rows of the tables of pairs (one column a pair): the displacement ``d = z_j − z_c``, the
+#: entries of ``R_c + R_j`` and of ``R_j``, the interval ``Δt``; then, filled by
+#: :func:`_score_pairs`, ``ln(w N(d; 0, S_s))``, ``ln((1 − w) g_f)``, ``ln g₂`` and the score.
+_D0, _D1, _S00, _S01, _S11, _J00, _J01, _J11, _DT, _LS, _LF, _LL, _SCORE = range(13)
+_ROWS = 13
+
+#: Rows of the table of the mixture in :func:`_mixture_state`: 0-3 the state, 4-13 the
+#: entries P00, P01, P11, P02, P03, P12, P13, P22, P33, P23; the row of each entry of ``P``
+#: (row-major, the lower triangle from the upper one)...
+_P_ROWS = np.array([4, 5, 7, 8, 5, 6, 9, 10, 7, 9, 11, 13, 8, 10, 13, 12])
+#: ... and the two state entries whose product is the spread term of rows 4-13.
+_SPREAD_I = np.array([0, 0, 1, 0, 0, 1, 1, 2, 3, 2])
+_SPREAD_J = np.array([0, 1, 1, 2, 3, 2, 3, 2, 3, 3])
+
+# Constants as 0-d arrays: an operation with one costs less than with a Python float.
+_ZERO, _HALF, _ONE, _TWO, _THREE = (np.array(v) for v in (0.0, 0.5, 1.0, 2.0, 3.0))
+_NEG_HALF, _TINY, _NEG_INF = np.array(-0.5), np.array(1e-300), np.array(-np.inf)
+_PI, _TWO_PI, _LOG_2PI = np.array(math.pi), np.array(2.0 * math.pi), np.array(math.log(2 * math.pi))
+
+
+def _score_pairs(
+    T: np.ndarray,
+    base: np.ndarray,
     *,
     max_speed: float,
     velocity_std: float,
     slow_fraction: float,
     q: float,
-) -> tuple[np.ndarray, np.ndarray]:
-    """``ln(w N(d; 0, S_s))`` and ``ln((1 − w) g_f)`` of each pair (module docstring), with
-    ``s`` the entries of ``R_c + R_j``:
+    gamma: float,
+) -> None:
+    """Fill the rows ``_LS``, ``_LF``, ``_LL`` and ``_SCORE`` of the table ``T`` of pairs:
+    ``a_s = ln(w N(d; 0, S_s))``, ``a_f = ln((1 − w) g_f)`` (module docstring),
+    ``ln g₂ = ln(e^{a_s} + e^{a_f})`` and the score ``base + ln g₂``, with ``base =
+    L_c + ln(P_D/λ_fa)`` (broadcasting to a row); the score is ``−∞`` where the pair fails
+    the velocity gate (:func:`pair_candidates`). With ``s`` the entries of ``R_c + R_j``:
 
         S_s = R_c + R_j + α I,  α = σ_v² Δt² + q Δt³/3,
         ln N(d; 0, S_s) = −½ dᵀ S_s⁻¹ d − ln 2π − ½ ln |S_s|,
         g_f = 1 / (π (v_max Δt)² + 2π |R_c + R_j|^½).
     """
-    s00, s01, s11 = s
-    alpha = velocity_std**2 * dt**2 + q * dt**3 / 3.0
+    d0, d1, s00, s01, s11, dt = T[_D0], T[_D1], T[_S00], T[_S01], T[_S11], T[_DT]
+    q = np.array(q)
+    det = s00 * s11 - s01 * s01
+    cross = _TWO * s01 * d0 * d1
+    alpha = np.array(velocity_std**2) * dt**2 + q * dt**3 / _THREE
     t00, t11 = s00 + alpha, s11 + alpha
     det_s = t00 * t11 - s01 * s01
-    d0, d1 = d[:, 0], d[:, 1]
-    m2 = (t11 * d0 * d0 - 2.0 * s01 * d0 * d1 + t00 * d1 * d1) / det_s
-    ll_s = -0.5 * m2 - math.log(2.0 * math.pi) - 0.5 * np.log(det_s)
-    det = s00 * s11 - s01 * s01
-    ll_f = -np.log(math.pi * (max_speed * dt) ** 2 + 2.0 * math.pi * np.sqrt(det))
-    return math.log(slow_fraction) + ll_s, math.log1p(-slow_fraction) + ll_f
-
-
-def _log_add(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """ln(eᵃ + eᵇ) without overflow."""
-    top = np.maximum(a, b)
-    return top + np.log(np.exp(a - top) + np.exp(b - top))
+    m2 = (t11 * d0 * d0 - cross + t00 * d1 * d1) / det_s
+    ll_s = _NEG_HALF * m2 - _LOG_2PI - _HALF * np.log(det_s)
+    reach = np.array(max_speed) * dt
+    ll_f = -np.log(_PI * reach**2 + _TWO_PI * np.sqrt(det))
+    a_s = np.add(np.array(math.log(slow_fraction)), ll_s, out=T[_LS])
+    a_f = np.add(np.array(math.log1p(-slow_fraction)), ll_f, out=T[_LF])
+    top = np.maximum(a_s, a_f)
+    loglik = np.add(top, np.log(np.exp(a_s - top) + np.exp(a_f - top)), out=T[_LL])
+    score = np.add(base, loglik, out=T[_SCORE])
+    rho = np.maximum(_ZERO, _ONE - reach / np.maximum(np.hypot(d0, d1), _TINY))
+    m2 = (s11 * d0 * d0 - cross + s00 * d1 * d1) / det
+    np.copyto(score, _NEG_INF, where=rho * rho * m2 > np.array(gamma))
 
 
 def two_point_estimate(
@@ -178,39 +207,38 @@ def two_point_estimate(
     z_j = np.asarray(z_j, dtype=float).reshape(-1, 2)
     R_c = np.asarray(R_c, dtype=float).reshape(-1, 2, 2)
     R_j = np.asarray(R_j, dtype=float).reshape(-1, 2, 2)
-    dt = np.broadcast_to(np.asarray(dt, dtype=float), (z_c.shape[0],))
-    d = z_j - z_c
-    a_s, a_f = _component_logliks(
-        d,
-        _entries(R_c + R_j),
-        dt,
+    k = z_c.shape[0]
+    T = np.empty((_ROWS, k))
+    T[_D0 : _D1 + 1] = (z_j - z_c).T
+    R_sum = R_c + R_j
+    T[_S00], T[_S01], T[_S11] = R_sum[:, 0, 0], R_sum[:, 0, 1], R_sum[:, 1, 1]
+    T[_J00], T[_J01], T[_J11] = R_j[:, 0, 0], R_j[:, 0, 1], R_j[:, 1, 1]
+    T[_DT] = dt
+    _score_pairs(
+        T,
+        _ZERO,
         max_speed=max_speed,
         velocity_std=velocity_std,
         slow_fraction=slow_fraction,
         q=q,
+        gamma=math.inf,
     )
-    x, P, loglik = _mixture_state(
-        d, R_c, R_j, dt, a_s, a_f, max_speed=max_speed, velocity_std=velocity_std, q=q
+    loglik = T[_LL].copy()
+    x, P = _mixture_state(
+        np.concatenate((T, T), axis=1), max_speed=max_speed, velocity_std=velocity_std, q=q
     )
     x[:, :2] += z_c
     return x, P, loglik
 
 
 def _mixture_state(
-    d: np.ndarray,
-    R_c: np.ndarray,
-    R_j: np.ndarray,
-    dt: np.ndarray,
-    a_s: np.ndarray,
-    a_f: np.ndarray,
-    *,
-    max_speed: float,
-    velocity_std: float,
-    q: float,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    T: np.ndarray, *, max_speed: float, velocity_std: float, q: float
+) -> tuple[np.ndarray, np.ndarray]:
     """The moment-matched mixture of the two components' Kalman posteriors of
-    ``[p − z_c, v]`` at the second detection, given their log weights ``a_s`` and ``a_f``;
-    and ``ln g₂ = ln(e^{a_s} + e^{a_f})``.
+    ``[p − z_c, v]`` at the second detection of each of the k pairs of the table ``T``
+    (rows up to ``_LL`` filled, by :func:`_score_pairs`), whose ``2k`` columns hold the pairs
+    twice (the slow component, then the fast one; ``T`` is overwritten); the component
+    weights are ``β_s = e^{a_s − ln g₂}``, ``β_f = e^{a_f − ln g₂}``.
 
     Component m has the prior ``p ~ N(z_c, R_c)``, ``v ~ N(0, σ_m² I)`` (σ_s = σ_v,
     σ_f² = v_max²/2), predicted over Δt by the nearly constant velocity model (PSD q):
@@ -225,50 +253,48 @@ def _mixture_state(
 
     The mixture is ``x = β_s x_s + β_f x_f`` and
     ``P = β_s P_s + β_f P_f + β_s β_f δ δᵀ`` with ``δ = x_s − x_f``. Both components are
-    computed at once, entry by entry, on ``(2, k)`` arrays.
-    """
-    loglik = _log_add(a_s, a_f)
-    beta = np.exp(np.stack([a_s, a_f]) - loglik)
-    var = np.array([[velocity_std**2], [0.5 * max_speed**2]])
-    a = var * dt**2 + q * dt**3 / 3.0
-    b = var * dt + q * dt**2 / 2.0
+    computed at once, entry by entry, on the rows of ``T``; the state and the upper triangle
+    of ``P`` go into one table that is mixed in a few operations."""
+    k = T.shape[1] // 2
+    T[_LS, k:] = T[_LF, k:]  # the components' log weights a_s, a_f
+    d0, d1, j00, j01, j11, dt = T[_D0], T[_D1], T[_J00], T[_J01], T[_J11], T[_DT]
+    q = np.array(q)
+    beta = np.exp(T[_LS] - T[_LL])
+    var = np.empty(2 * k)
+    var[:k], var[k:] = velocity_std**2, 0.5 * max_speed**2
+    dt2 = dt**2
+    a = var * dt2 + q * dt**3 / _THREE
+    b = var * dt + q * dt2 / _TWO
     c = var + q * dt
-    c00, c01, c11 = _entries(R_c)
-    j00, j01, j11 = _entries(R_j)
-    s00, s11 = c00 + j00 + a, c11 + j11 + a
-    s01 = c01 + j01
+    s00, s01, s11 = T[_S00] + a, T[_S01], T[_S11] + a
     det = s00 * s11 - s01 * s01
     A00, A01, A11 = s11 / det, -s01 / det, s00 / det
-    d0, d1 = d[:, 0], d[:, 1]
     Ad0, Ad1 = A00 * d0 + A01 * d1, A01 * d0 + A11 * d1
     RA00, RA01 = j00 * A00 + j01 * A01, j00 * A01 + j01 * A11
     RA10, RA11 = j01 * A00 + j11 * A01, j01 * A01 + j11 * A11
-    k = d.shape[0]
-    X = np.empty((2, k, 4))
-    X[:, :, 0] = d0 - (j00 * Ad0 + j01 * Ad1)
-    X[:, :, 1] = d1 - (j01 * Ad0 + j11 * Ad1)
-    X[:, :, 2] = b * Ad0
-    X[:, :, 3] = b * Ad1
-    P = np.empty((2, k, 4, 4))
-    P[:, :, 0, 0] = j00 - (RA00 * j00 + RA01 * j01)
-    P[:, :, 0, 1] = P[:, :, 1, 0] = j01 - (RA00 * j01 + RA01 * j11)
-    P[:, :, 1, 1] = j11 - (RA10 * j01 + RA11 * j11)
-    P[:, :, 0, 2] = P[:, :, 2, 0] = b * RA00
-    P[:, :, 0, 3] = P[:, :, 3, 0] = b * RA01
-    P[:, :, 1, 2] = P[:, :, 2, 1] = b * RA10
-    P[:, :, 1, 3] = P[:, :, 3, 1] = b * RA11
+    E = np.empty((14, 2 * k))
+    np.subtract(d0, j00 * Ad0 + j01 * Ad1, out=E[0])
+    np.subtract(d1, j01 * Ad0 + j11 * Ad1, out=E[1])
+    np.multiply(b, Ad0, out=E[2])
+    np.multiply(b, Ad1, out=E[3])
+    np.subtract(j00, RA00 * j00 + RA01 * j01, out=E[4])
+    np.subtract(j01, RA00 * j01 + RA01 * j11, out=E[5])
+    np.subtract(j11, RA10 * j01 + RA11 * j11, out=E[6])
+    np.multiply(b, RA00, out=E[7])
+    np.multiply(b, RA01, out=E[8])
+    np.multiply(b, RA10, out=E[9])
+    np.multiply(b, RA11, out=E[10])
     b2 = b * b
-    P[:, :, 2, 2] = c - b2 * A00
-    P[:, :, 2, 3] = P[:, :, 3, 2] = -b2 * A01
-    P[:, :, 3, 3] = c - b2 * A11
-    x = beta[0][:, None] * X[0] + beta[1][:, None] * X[1]
-    delta = X[0] - X[1]
-    P_mix = (
-        beta[0][:, None, None] * P[0]
-        + beta[1][:, None, None] * P[1]
-        + (beta[0] * beta[1])[:, None, None] * (delta[:, :, None] * delta[:, None, :])
-    )
-    return x, P_mix, loglik
+    np.subtract(c, b2 * A00, out=E[11])
+    np.subtract(c, b2 * A11, out=E[12])
+    np.multiply(-b2, A01, out=E[13])
+    delta = E[:4, :k] - E[:4, k:]
+    E *= beta
+    mix = E[:, :k] + E[:, k:]
+    spread = delta.take(_SPREAD_I, axis=0) * delta.take(_SPREAD_J, axis=0)
+    spread *= beta[:k] * beta[k:]
+    mix[4:] += spread
+    return mix[:4].T.copy(), mix.take(_P_ROWS, axis=0).T.copy().reshape(k, 4, 4)
 
 
 def search_radius(
@@ -335,87 +361,126 @@ def pair_candidates(
     are left out. Detections are indexed into ``z``.
 
     The velocity gate of the module docstring is ``ρ² dᵀ (R_c + R_j)⁻¹ d ≤ γ`` with
-    ``ρ = max(0, 1 − v_max Δt / |d|)``: the part of ``d`` beyond the reach of ``v_max``."""
-    empty_i = np.zeros(0, dtype=np.intp)
-    none = TwoPointTracks(empty_i, empty_i, np.zeros((0, 4)), np.zeros((0, 4, 4)), np.zeros(0))
+    ``ρ = max(0, 1 − v_max Δt / |d|)``: the part of ``d`` beyond the reach of ``v_max``.
+    Up to ``BRUTE_FORCE_CELLS`` (candidate, free detection) pairs every pair is scored: the
+    floor and the gate reject every pair that the search of larger problems leaves out, so
+    both give the same pairs."""
     dt_all = t - candidates.time
-    offered = np.flatnonzero(dt_all >= MIN_PAIR_INTERVAL)
-    free_idx = np.flatnonzero(free)
-    if offered.size == 0 or free_idx.size == 0:
-        return none
-    zf, Rf = z[free_idx], R[free_idx]
-    noise = float(max_eigenvalue_2x2(Rf).max())
-    floor_min = float(min_score) if np.ndim(min_score) == 0 else float(np.min(min_score[free_idx]))
-    lam_c = max_eigenvalue_2x2(candidates.R[offered])
-    radius = search_radius(
-        dt_all[offered],
-        candidates.score[offered] + (math.log(pd) - math.log(clutter_density)),
-        lam_c + noise,
-        floor_min,
-        max_speed=max_speed,
-        velocity_std=velocity_std,
-        slow_fraction=slow_fraction,
-        q=q,
-        gamma=gamma,
+    offered = (dt_all >= MIN_PAIR_INTERVAL).nonzero()[0]
+    free_idx = np.asarray(free).nonzero()[0]
+    n_c, n_f = offered.size, free_idx.size
+    if n_c == 0 or n_f == 0:
+        return _no_pairs()
+    zf, Rf = z.take(free_idx, axis=0), R.take(free_idx, axis=0)
+    floor = min_score if np.ndim(min_score) == 0 else np.asarray(min_score).take(free_idx)
+    kw = dict(max_speed=max_speed, velocity_std=velocity_std, slow_fraction=slow_fraction, q=q)
+    kw["gamma"] = gamma
+    cz, cR, dt_c, base = candidates.z, candidates.R, dt_all, candidates.score
+    if n_c < dt_all.size:
+        cz, cR = cz.take(offered, axis=0), cR.take(offered, axis=0)
+        dt_c, base = dt_c.take(offered), base.take(offered)
+    base = base + (math.log(pd) - math.log(clutter_density))
+    if n_c * n_f <= BRUTE_FORCE_CELLS:
+        # Every pair, in (candidate, detection) grids.
+        T = np.empty((_ROWS, n_c, n_f))
+        np.subtract(zf[:, 0], cz[:, 0, None], out=T[_D0])
+        np.subtract(zf[:, 1], cz[:, 1, None], out=T[_D1])
+        T[_J00 : _J11 + 1] = Rf.reshape(n_f, 4).T[[0, 1, 3], None]
+        np.add(cR[:, 0, 0, None], T[_J00], out=T[_S00])
+        np.add(cR[:, 0, 1, None], T[_J01], out=T[_S01])
+        np.add(cR[:, 1, 1, None], T[_J11], out=T[_S11])
+        T[_DT] = dt_c[:, None]
+        _score_pairs(T, base[:, None], **kw)
+        score = T[_SCORE]
+        # Rival pairs of one candidate, or of one detection, are pruned when far less likely
+        # than the best of them.
+        best_c = np.maximum.reduce(score, axis=1, keepdims=True)
+        best_d = np.maximum.reduce(score, axis=0)
+        good = (
+            (score > floor)
+            & (score >= best_c - PAIR_PRUNE_LOG_RATIO)
+            & (score >= best_d - PAIR_PRUNE_LOG_RATIO)
+        )
+        ci, fj = good.nonzero()  # by candidate, then detection
+        if ci.size == 0:
+            return _no_pairs()
+        T, cols = T.reshape(_ROWS, -1), ci * n_f + fj
+    else:
+        ci, fj, T, cols = _searched_pairs(cz, cR, dt_c, base, zf, Rf, floor, **kw)
+        if ci.size == 0:
+            return _no_pairs()
+    # The ``max_pairs`` best of each candidate are kept, best first.
+    order = np.lexsort((-T[_SCORE].take(cols), ci))
+    if ci.size > max_pairs:
+        rank = np.arange(ci.size) - ci.searchsorted(ci)  # ci is sorted: ci[order] == ci
+        order = order[rank < max_pairs]
+    ci, fj, cols = ci[order], fj[order], cols[order]
+    T = T.take(np.concatenate((cols, cols)), axis=1)  # each pair twice: slow, fast
+    x, P = _mixture_state(T, max_speed=max_speed, velocity_std=velocity_std, q=q)
+    x[:, :2] += cz.take(ci, axis=0)
+    return TwoPointTracks(
+        candidate=ci if n_c == dt_all.size else offered[ci],
+        detection=free_idx[fj],
+        x=x,
+        P=P,
+        score=T[_SCORE, : ci.size],
     )
-    searched = np.flatnonzero(radius >= 0.0)
-    offered = offered[searched]
-    if offered.size == 0:
+
+
+def _searched_pairs(
+    cz: np.ndarray,
+    cR: np.ndarray,
+    dt: np.ndarray,
+    base: np.ndarray,
+    zf: np.ndarray,
+    Rf: np.ndarray,
+    floor: float | np.ndarray,
+    **kw: float,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The pairs of :func:`pair_candidates` in a large problem: each candidate ``i`` (``cz``,
+    ``cR``, ``dt``, ``base`` its rows) searches the free detections ``j`` (``zf``, ``Rf``,
+    ``floor`` a number or theirs) within :func:`search_radius`. Returns ``i`` and ``j`` (by
+    candidate, then detection) of the pairs that pass the floor and the pruning of rivals,
+    the table of the pairs searched (``_ROWS``, one column a pair) and their columns."""
+    empty = np.zeros(0, dtype=np.intp)
+    none = empty, empty, np.zeros((_ROWS, 0)), empty
+    radius = search_radius(
+        dt,
+        base,
+        max_eigenvalue_2x2(cR) + float(max_eigenvalue_2x2(Rf).max()),
+        float(np.min(floor)),
+        **kw,
+    )
+    searched = (radius >= 0.0).nonzero()[0]
+    if searched.size == 0:
         return none
-    i, fj = pairs_within(candidates.z[offered], radius[searched], zf)
+    i, fj = pairs_within(cz.take(searched, axis=0), radius.take(searched), zf)
     n = i.size
     if n == 0:
         return none
-    ci = offered[i]  # grouped by candidate, in candidate order
-    dt = dt_all[ci]
-    d = zf[fj] - candidates.z[ci]
-    R_sum = candidates.R[ci] + Rf[fj]
-    s = _entries(R_sum)
-    d0, d1 = d[:, 0], d[:, 1]
-    rho = np.maximum(0.0, 1.0 - max_speed * dt / np.maximum(np.hypot(d0, d1), 1e-300))
-    s00, s01, s11 = s
-    m2 = (s11 * d0 * d0 - 2.0 * s01 * d0 * d1 + s00 * d1 * d1) / (s00 * s11 - s01 * s01)
-    a_s, a_f = _component_logliks(
-        d,
-        s,
-        dt,
-        max_speed=max_speed,
-        velocity_std=velocity_std,
-        slow_fraction=slow_fraction,
-        q=q,
-    )
-    score = candidates.score[ci] + (math.log(pd) - math.log(clutter_density)) + _log_add(a_s, a_f)
-    score[rho * rho * m2 > gamma] = -np.inf
+    ci = searched[i]  # grouped by candidate, in candidate order
+    T = np.empty((_ROWS, n))
+    T[_D0 : _D1 + 1] = (zf.take(fj, axis=0) - cz.take(ci, axis=0)).T
+    Rj = Rf.take(fj, axis=0)
+    R_sum = cR.take(ci, axis=0) + Rj
+    T[_S00], T[_S01], T[_S11] = R_sum[:, 0, 0], R_sum[:, 0, 1], R_sum[:, 1, 1]
+    T[_J00], T[_J01], T[_J11] = Rj[:, 0, 0], Rj[:, 0, 1], Rj[:, 1, 1]
+    T[_DT] = dt.take(ci)
+    _score_pairs(T, base.take(ci), **kw)
+    score = T[_SCORE]
     # Rival pairs of one candidate, or of one detection, are pruned when far less likely than
-    # the best of them; then the ``max_pairs`` best of each candidate are kept.
+    # the best of them.
     new_group = np.empty(n, dtype=bool)
     new_group[0] = True
     np.not_equal(ci[1:], ci[:-1], out=new_group[1:])
     group = np.cumsum(new_group) - 1
     best_c = np.maximum.reduceat(score, np.flatnonzero(new_group))[group]
-    best_d = np.full(free_idx.size, -np.inf)
+    best_d = np.full(zf.shape[0], -np.inf)
     np.maximum.at(best_d, fj, score)
-    floor = min_score if np.ndim(min_score) == 0 else np.asarray(min_score)[free_idx][fj]
-    good = np.flatnonzero(
-        (score > floor)
+    f = floor if np.ndim(floor) == 0 else floor.take(fj)
+    good = (
+        (score > f)
         & (score >= best_c - PAIR_PRUNE_LOG_RATIO)
         & (score >= best_d[fj] - PAIR_PRUNE_LOG_RATIO)
-    )
-    if good.size == 0:
-        return none
-    by_candidate, rank = sort_within_groups(ci[good], score[good])
-    order = good[by_candidate[rank < max_pairs]]
-    ci, fj = ci[order], fj[order]
-    x, P, _ = _mixture_state(
-        d[order],
-        candidates.R[ci],
-        Rf[fj],
-        dt[order],
-        a_s[order],
-        a_f[order],
-        max_speed=max_speed,
-        velocity_std=velocity_std,
-        q=q,
-    )
-    x[:, :2] += candidates.z[ci]
-    return TwoPointTracks(candidate=ci, detection=free_idx[fj], x=x, P=P, score=score[order])
+    ).nonzero()[0]
+    return ci[good], fj[good], T, good

@@ -237,3 +237,103 @@ def test_the_search_radius_shrinks_to_slow_reach_where_fast_starts_cannot_score(
     assert r == pytest.approx(700.0 * 10.0 + math.sqrt(18.4 * 800.0))
     hopeless = search_radius(dt, np.array([-40.0]), noise, -6.9, **kwargs)[0]
     assert hopeless < 0
+
+
+def _reference_two_point(zc, Rc, zj, Rj, dt, *, max_speed, velocity_std, slow_fraction, q):
+    """One pair the long way: the Kalman update of each component's prior, predicted by the
+    nearly constant velocity model, with the second detection; the moment-matched mixture."""
+    F = np.block([[np.eye(2), dt * np.eye(2)], [np.zeros((2, 2)), np.eye(2)]])
+    Q = q * np.block(
+        [[dt**3 / 3 * np.eye(2), dt**2 / 2 * np.eye(2)], [dt**2 / 2 * np.eye(2), dt * np.eye(2)]]
+    )
+    H = np.hstack([np.eye(2), np.zeros((2, 2))])
+    xs, Ps, logw = [], [], []
+    for var in (velocity_std**2, 0.5 * max_speed**2):
+        x0 = F @ np.r_[zc, 0.0, 0.0]
+        P0 = F @ np.diag([0.0, 0.0, var, var]) @ F.T + Q
+        P0[:2, :2] += Rc
+        S = H @ P0 @ H.T + Rj
+        K = P0 @ H.T @ np.linalg.inv(S)
+        xs.append(x0 + K @ (zj - zc))
+        Ps.append(P0 - K @ S @ K.T)
+    d = zj - zc
+    S_s = Rc + Rj + (velocity_std**2 * dt**2 + q * dt**3 / 3) * np.eye(2)
+    logw.append(
+        math.log(slow_fraction)
+        - 0.5 * d @ np.linalg.solve(S_s, d)
+        - math.log(2 * math.pi)
+        - 0.5 * math.log(np.linalg.det(S_s))
+    )
+    g_f = 1.0 / (math.pi * (max_speed * dt) ** 2 + 2 * math.pi * math.sqrt(np.linalg.det(Rc + Rj)))
+    logw.append(math.log1p(-slow_fraction) + math.log(g_f))
+    loglik = np.logaddexp(*logw)
+    beta = np.exp(np.array(logw) - loglik)
+    x = beta[0] * xs[0] + beta[1] * xs[1]
+    delta = xs[0] - xs[1]
+    P = beta[0] * Ps[0] + beta[1] * Ps[1] + beta[0] * beta[1] * np.outer(delta, delta)
+    return x, P, loglik
+
+
+def _random_covariances(rng, n, scale):
+    A = rng.normal(0.0, scale, (n, 2, 2))
+    return A @ A.transpose(0, 2, 1) + 0.1 * scale**2 * np.eye(2)
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_two_point_estimate_matches_per_pair_kalman_updates(seed):
+    """The vectorised mixture agrees with two Kalman updates and the moment matching done
+    pair by pair, for pairs from slow to fast, close to far apart in time."""
+    rng = np.random.default_rng(seed)
+    n = 40
+    kw = dict(max_speed=700.0, velocity_std=15.0, slow_fraction=0.8, q=0.5)
+    zc = rng.uniform(-1e4, 1e4, (n, 2))
+    dt = rng.uniform(0.05, 12.0, n)
+    speed = np.where(rng.random(n) < 0.5, rng.uniform(0, 30, n), rng.uniform(30, 700, n))
+    heading = rng.uniform(0, 2 * math.pi, n)
+    zj = zc + (speed * dt)[:, None] * np.c_[np.cos(heading), np.sin(heading)]
+    Rc, Rj = _random_covariances(rng, n, 20.0), _random_covariances(rng, n, 40.0)
+    x, P, loglik = two_point_estimate(zc, Rc, zj, Rj, dt, **kw)
+    for i in range(n):
+        x_ref, P_ref, ll_ref = _reference_two_point(zc[i], Rc[i], zj[i], Rj[i], dt[i], **kw)
+        np.testing.assert_allclose(x[i], x_ref, rtol=1e-12, atol=1e-12 * np.abs(x_ref).max())
+        np.testing.assert_allclose(P[i], P_ref, rtol=1e-10, atol=1e-12 * np.abs(P_ref).max())
+        assert loglik[i] == pytest.approx(ll_ref, rel=1e-12, abs=1e-12)
+        np.testing.assert_array_equal(P[i], P[i].T)
+
+
+@pytest.mark.parametrize("dense", [False, True])
+@pytest.mark.parametrize("floor", [-math.inf, -6.9, 0.0, "per_detection"])
+def test_small_problems_score_every_pair_with_the_same_result_as_the_search(
+    monkeypatch, dense, floor
+):
+    """Up to BRUTE_FORCE_CELLS pairs every pair is scored; the kept pairs, their order,
+    states and scores are exactly those of the search that larger problems use."""
+    rng = np.random.default_rng(11 if dense else 12)
+    span = 3e3 if dense else 60e3
+    kept = 0
+    for _ in range(6):
+        n_c, n_z = rng.integers(1, 60), rng.integers(1, 60)
+        t = 10.0
+        cand = Candidates(
+            z=rng.uniform(-span, span, (n_c, 2)),
+            R=_random_covariances(rng, n_c, 15.0),
+            time=t - rng.choice([0.0, 1.0, 2.0, 4.0, 9.0], n_c),  # some not offered (Δt = 0)
+            score=rng.uniform(-5.0, 3.0, n_c),
+            detection_ids=np.empty(n_c, dtype=object),
+            origin=np.arange(n_c),
+        )
+        z = rng.uniform(-span, span, (n_z, 2))
+        near = rng.integers(0, n_c, n_z // 2)
+        z[: near.size] = cand.z[near] + rng.normal(0.0, 300.0, (near.size, 2))
+        R = _random_covariances(rng, n_z, 15.0)
+        free = rng.random(n_z) < 0.8
+        min_score = rng.uniform(-8.0, 2.0, n_z) if floor == "per_detection" else floor
+        kwargs = dict(PAIRING, clutter_density=1e-5 if dense else 1e-9, min_score=min_score)
+        small = pair_candidates(cand, z, R, free, t, **kwargs)
+        monkeypatch.setattr(initiation, "BRUTE_FORCE_CELLS", 0)
+        searched = pair_candidates(cand, z, R, free, t, **kwargs)
+        monkeypatch.undo()
+        for field in ("candidate", "detection", "x", "P", "score"):
+            np.testing.assert_array_equal(getattr(small, field), getattr(searched, field))
+        kept += small.size
+    assert kept > 0 or floor == 0.0
