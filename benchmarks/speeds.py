@@ -25,6 +25,7 @@ from __future__ import annotations
 import argparse
 import io
 import json
+import math
 import os
 import statistics
 import subprocess
@@ -60,16 +61,12 @@ WARMUP_SCANS = 8
 
 
 def warmup_batches(scenario: ScriptedScenario, scans: int = WARMUP_SCANS) -> int:
-    """The number of batches in the first ``scans`` revisit periods of the slowest radar."""
-    sims_end = min(r.time_offset for r in scenario.radars) + scans * max(
+    """The number of batches in the first ``scans`` revisit periods of the slowest radar:
+    each radar's reports at ``offset + k · period`` before that end."""
+    end = min(r.time_offset for r in scenario.radars) + scans * max(
         r.period for r in scenario.radars
     )
-    return sum(
-        1
-        for r in scenario.radars
-        for k in range(scans + 1)
-        if r.time_offset + k * r.period < sims_end - 1e-9
-    )
+    return sum(max(0, math.ceil((end - r.time_offset) / r.period)) for r in scenario.radars)
 
 
 def run(

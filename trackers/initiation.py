@@ -142,6 +142,19 @@ _NEG_HALF, _TINY, _NEG_INF = np.array(-0.5), np.array(1e-300), np.array(-np.inf)
 _PI, _TWO_PI, _LOG_2PI = np.array(math.pi), np.array(2.0 * math.pi), np.array(math.log(2 * math.pi))
 
 
+def _pair_table(d: np.ndarray, R_c: np.ndarray, R_j: np.ndarray, dt: np.ndarray) -> np.ndarray:
+    """The table of k pairs (``_ROWS`` rows, one column a pair) with the rows of the inputs
+    filled: the displacements ``d (k, 2)``, the entries of ``R_c + R_j`` and of ``R_j``
+    (``(k, 2, 2)`` each) and the intervals ``dt`` (``(k,)`` or a number)."""
+    T = np.empty((_ROWS, d.shape[0]))
+    T[_D0 : _D1 + 1] = d.T
+    R_sum = R_c + R_j
+    T[_S00], T[_S01], T[_S11] = R_sum[:, 0, 0], R_sum[:, 0, 1], R_sum[:, 1, 1]
+    T[_J00], T[_J01], T[_J11] = R_j[:, 0, 0], R_j[:, 0, 1], R_j[:, 1, 1]
+    T[_DT] = dt
+    return T
+
+
 def _score_pairs(
     T: np.ndarray,
     base: np.ndarray,
@@ -207,13 +220,7 @@ def two_point_estimate(
     z_j = np.asarray(z_j, dtype=float).reshape(-1, 2)
     R_c = np.asarray(R_c, dtype=float).reshape(-1, 2, 2)
     R_j = np.asarray(R_j, dtype=float).reshape(-1, 2, 2)
-    k = z_c.shape[0]
-    T = np.empty((_ROWS, k))
-    T[_D0 : _D1 + 1] = (z_j - z_c).T
-    R_sum = R_c + R_j
-    T[_S00], T[_S01], T[_S11] = R_sum[:, 0, 0], R_sum[:, 0, 1], R_sum[:, 1, 1]
-    T[_J00], T[_J01], T[_J11] = R_j[:, 0, 0], R_j[:, 0, 1], R_j[:, 1, 1]
-    T[_DT] = dt
+    T = _pair_table(z_j - z_c, R_c, R_j, dt)
     _score_pairs(
         T,
         _ZERO,
@@ -373,8 +380,13 @@ def pair_candidates(
         return _no_pairs()
     zf, Rf = z.take(free_idx, axis=0), R.take(free_idx, axis=0)
     floor = min_score if np.ndim(min_score) == 0 else np.asarray(min_score).take(free_idx)
-    kw = dict(max_speed=max_speed, velocity_std=velocity_std, slow_fraction=slow_fraction, q=q)
-    kw["gamma"] = gamma
+    kw = dict(
+        max_speed=max_speed,
+        velocity_std=velocity_std,
+        slow_fraction=slow_fraction,
+        q=q,
+        gamma=gamma,
+    )
     cz, cR, dt_c, base = candidates.z, candidates.R, dt_all, candidates.score
     if n_c < dt_all.size:
         cz, cR = cz.take(offered, axis=0), cR.take(offered, axis=0)
@@ -459,13 +471,12 @@ def _searched_pairs(
     if n == 0:
         return none
     ci = searched[i]  # grouped by candidate, in candidate order
-    T = np.empty((_ROWS, n))
-    T[_D0 : _D1 + 1] = (zf.take(fj, axis=0) - cz.take(ci, axis=0)).T
-    Rj = Rf.take(fj, axis=0)
-    R_sum = cR.take(ci, axis=0) + Rj
-    T[_S00], T[_S01], T[_S11] = R_sum[:, 0, 0], R_sum[:, 0, 1], R_sum[:, 1, 1]
-    T[_J00], T[_J01], T[_J11] = Rj[:, 0, 0], Rj[:, 0, 1], Rj[:, 1, 1]
-    T[_DT] = dt.take(ci)
+    T = _pair_table(
+        zf.take(fj, axis=0) - cz.take(ci, axis=0),
+        cR.take(ci, axis=0),
+        Rf.take(fj, axis=0),
+        dt.take(ci),
+    )
     _score_pairs(T, base.take(ci), **kw)
     score = T[_SCORE]
     # Rival pairs of one candidate, or of one detection, are pruned when far less likely than
