@@ -218,6 +218,26 @@ class GatingConfig:
     gate_probability: float = _field(
         0.9999, "probability that a true detection falls in the chi-square gate", gt=0, le=1 - 1e-12
     )
+    manoeuvre_acceleration: float = _field(
+        50.0,
+        "a confirmed track with nothing in its gate looks as far as a manoeuvre of this "
+        "acceleration since its last update reaches, m/s² (0: not at all)",
+        ge=0,
+        le=1e4,
+    )
+    manoeuvre_turn_rate: float = _field(
+        0.1,
+        "and as far as a turn at this rate reaches (the acceleration is at most rate × speed), "
+        "rad/s",
+        gt=0,
+        le=10.0,
+    )
+    manoeuvre_acceleration: float = _field(
+        50.0,
+        "a confirmed track with nothing in its gate searches the reach of this acceleration, m/s²",
+        ge=0,
+        le=1e4,
+    )
 
     def __post_init__(self) -> None:
         _check_bounds(self, "gating")

@@ -30,6 +30,7 @@ import numpy as np
 
 from trackers.association.gating import gate
 from trackers.association.gnn import gnn_assign
+from trackers.association.manoeuvre import manoeuvre_search
 from trackers.config import TrackerConfig
 from trackers.filters.imm import imm_combine, imm_predict, imm_update, transition_matrix
 from trackers.initiation import MIN_PAIR_INTERVAL, Candidates, pair_candidates
@@ -391,6 +392,34 @@ class IndividualTracker:
         ]
         taken = np.zeros(scan.size, dtype=bool)
         taken[dj[sel]] = True
+        # A confirmed track with nothing in its gate looks again, within the reach of a
+        # manoeuvre since its last update, among the detections no confirmed track gates.
+        gated = np.zeros(scan.size, dtype=bool)
+        gated[dj[first]] = True
+        lost = tracks.confirmed.copy()
+        lost[ti[sel]] = False
+        lost = np.flatnonzero(lost)
+        free = np.flatnonzero(~gated)
+        found = None
+        if lost.size and free.size:
+            found = manoeuvre_search(
+                x_pred[lost],
+                P_pred[lost],
+                c_bar[lost],
+                xc[lost],
+                Pc[lost],
+                scan.time - tracks.updated[lost],
+                scan.z[free],
+                scan.R[free],
+                pd[lost],
+                lam_fa,
+                a_max=config.gating.manoeuvre_acceleration,
+                omega_max=config.gating.manoeuvre_turn_rate,
+                straight_sojourn=config.motion.sojourn_times[0],
+                gamma=config.gating.threshold,
+            )
+        if found is not None:
+            taken[free[found.detection]] = True
         second = np.flatnonzero(~first & ~taken[dj])
         sel = np.concatenate(
             [sel, second[gnn_assign(ti[second], dj[second], gain[second], len(tracks), scan.size)]]
@@ -399,12 +428,25 @@ class IndividualTracker:
 
         x, P, mu = x_pred.copy(), P_pred.copy(), c_bar.copy()
         score = tracks.score + miss_increment(pd)
+        hit = hit[sel]
+        if found is not None:
+            at, ad = (
+                np.concatenate([at, lost[found.track]]),
+                np.concatenate([ad, free[found.detection]]),
+            )
+            xu, Pu, muu = (
+                np.concatenate([a[sel], b])
+                for a, b in ((xu, found.x), (Pu, found.P), (muu, found.mu))
+            )
+            hit = np.concatenate([hit, found.hit])
+        else:
+            xu, Pu, muu = xu[sel], Pu[sel], muu[sel]
         hits = tracks.hits.copy()
         updated = tracks.updated.copy()
         det_ids = _objects([()] * len(tracks))
-        if sel.size:
-            x[at], P[at], mu[at] = xu[sel], Pu[sel], muu[sel]
-            score[at] = tracks.score[at] + hit[sel]
+        if at.size:
+            x[at], P[at], mu[at] = xu, Pu, muu
+            score[at] = tracks.score[at] + hit
             hits[at] += 1
             updated[at] = scan.time
             ids = scan.detection_ids
@@ -417,6 +459,8 @@ class IndividualTracker:
         claims = np.full(scan.size, -np.inf)
         claims[ad] = score[at]
         claims[dj[tracks.confirmed[ti]]] = np.inf  # a confirmed track's detections included
+        if found is not None:
+            claims[free[found.detection]] = np.inf
         new = replace(
             tracks,
             x=x,
