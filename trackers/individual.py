@@ -30,7 +30,7 @@ import numpy as np
 
 from trackers.association.gating import gate
 from trackers.association.gnn import gnn_assign
-from trackers.association.manoeuvre import manoeuvre_search
+from trackers.association.manoeuvre import ManoeuvreMatch, manoeuvre_search
 from trackers.config import TrackerConfig
 from trackers.filters.imm import imm_combine, imm_predict, imm_update, transition_matrix
 from trackers.initiation import MIN_PAIR_INTERVAL, Candidates, pair_candidates
@@ -394,32 +394,9 @@ class IndividualTracker:
         taken[dj[sel]] = True
         # A confirmed track with nothing in its gate looks again, within the reach of a
         # manoeuvre since its last update, among the detections no confirmed track gates.
-        gated = np.zeros(scan.size, dtype=bool)
-        gated[dj[first]] = True
-        lost = tracks.confirmed.copy()
-        lost[ti[sel]] = False
-        lost = np.flatnonzero(lost)
-        free = np.flatnonzero(~gated)
-        found = None
-        if lost.size and free.size:
-            found = manoeuvre_search(
-                x_pred[lost],
-                P_pred[lost],
-                c_bar[lost],
-                xc[lost],
-                Pc[lost],
-                scan.time - tracks.updated[lost],
-                scan.z[free],
-                scan.R[free],
-                pd[lost],
-                lam_fa,
-                a_max=config.gating.manoeuvre_acceleration,
-                omega_max=config.gating.manoeuvre_turn_rate,
-                straight_sojourn=config.motion.sojourn_times[0],
-                gamma=config.gating.threshold,
-            )
+        found = _manoeuvre_found(pred, scan, ti[sel], dj[first], pd, lam_fa)
         if found is not None:
-            taken[free[found.detection]] = True
+            taken[found.detection] = True
         second = np.flatnonzero(~first & ~taken[dj])
         sel = np.concatenate(
             [sel, second[gnn_assign(ti[second], dj[second], gain[second], len(tracks), scan.size)]]
@@ -428,19 +405,13 @@ class IndividualTracker:
 
         x, P, mu = x_pred.copy(), P_pred.copy(), c_bar.copy()
         score = tracks.score + miss_increment(pd)
-        hit = hit[sel]
+        xu, Pu, muu, hit = xu[sel], Pu[sel], muu[sel], hit[sel]
         if found is not None:
-            at, ad = (
-                np.concatenate([at, lost[found.track]]),
-                np.concatenate([ad, free[found.detection]]),
+            at, ad = np.concatenate([at, found.track]), np.concatenate([ad, found.detection])
+            xu, Pu, muu, hit = (
+                np.concatenate(pair)
+                for pair in ((xu, found.x), (Pu, found.P), (muu, found.mu), (hit, found.hit))
             )
-            xu, Pu, muu = (
-                np.concatenate([a[sel], b])
-                for a, b in ((xu, found.x), (Pu, found.P), (muu, found.mu))
-            )
-            hit = np.concatenate([hit, found.hit])
-        else:
-            xu, Pu, muu = xu[sel], Pu[sel], muu[sel]
         hits = tracks.hits.copy()
         updated = tracks.updated.copy()
         det_ids = _objects([()] * len(tracks))
@@ -460,7 +431,7 @@ class IndividualTracker:
         claims[ad] = score[at]
         claims[dj[tracks.confirmed[ti]]] = np.inf  # a confirmed track's detections included
         if found is not None:
-            claims[free[found.detection]] = np.inf
+            claims[found.detection] = np.inf
         new = replace(
             tracks,
             x=x,
@@ -970,6 +941,47 @@ def _handed_in(
         Pc=np.concatenate([pred.Pc, Pc[keep]]),
     )
     return merged, tuple(renamed)
+
+
+def _manoeuvre_found(
+    pred: _Prediction,
+    scan: Scan,
+    assigned: np.ndarray,
+    gated: np.ndarray,
+    pd: np.ndarray,
+    lam_fa: float,
+) -> ManoeuvreMatch | None:
+    """:func:`manoeuvre_search` for the confirmed tracks not in ``assigned`` over the
+    detections not in ``gated`` (those in a confirmed track's gate), its indices turned into
+    the scan's tracks and detections."""
+    config, tracks = pred.config, pred.tracks
+    lost = tracks.confirmed.copy()
+    lost[assigned] = False
+    lost = np.flatnonzero(lost)
+    free = np.ones(scan.size, dtype=bool)
+    free[gated] = False
+    free = np.flatnonzero(free)
+    if lost.size == 0 or free.size == 0:
+        return None
+    found = manoeuvre_search(
+        pred.x_pred[lost],
+        pred.P_pred[lost],
+        pred.c_bar[lost],
+        pred.xc[lost],
+        pred.Pc[lost],
+        scan.time - tracks.updated[lost],
+        scan.z[free],
+        scan.R[free],
+        pd[lost],
+        lam_fa,
+        a_max=config.gating.manoeuvre_acceleration,
+        omega_max=config.gating.manoeuvre_turn_rate,
+        straight_sojourn=config.motion.sojourn_times[0],
+        gamma=config.gating.threshold,
+    )
+    if found is None:
+        return None
+    return replace(found, track=lost[found.track], detection=free[found.detection])
 
 
 def _missed_branch(time: np.ndarray, score: np.ndarray, t: float, miss: float) -> np.ndarray:
