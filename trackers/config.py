@@ -279,6 +279,11 @@ class TrackManagementConfig:
 
     def __post_init__(self) -> None:
         _check_bounds(self, "track_management")
+        if not (math.isfinite(self.confirm_threshold) and math.isfinite(self.delete_threshold)):
+            raise ValueError(
+                "track_management.p_false_confirm: too small, the confirmation threshold "
+                "ln((1 − β)/α) must be a finite number (use 1e-300 or more)"
+            )
         if self.confirm_threshold <= self.delete_threshold:
             raise ValueError("track_management: confirmation threshold must exceed deletion's")
 

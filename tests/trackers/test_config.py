@@ -36,6 +36,7 @@ def test_merged_changes_only_the_patched_field():
         ({"motion": {"models": ["cv", "xx"]}}, "motion.models"),
         ({"motion": {"models": ["cv"]}}, "motion.sojourn_times"),
         ({"gating": {"gate_probability": 1.0}}, "gating.gate_probability"),
+        ({"track_management": {"p_false_confirm": 5e-324}}, "track_management.p_false_confirm"),
         ({"gating": {"nope": 1.0}}, "gating"),
         ({"measurement": {"position_std": "ten"}}, "measurement.position_std"),
         ({"measurement": {"position_std": True}}, "measurement.position_std"),
