@@ -59,6 +59,11 @@ ALONG_TRACK_FRACTION = 0.2
 REACH_FRACTION = 0.5
 
 
+def _acceleration_bound(velocity: np.ndarray, a_max: float, omega_max: float) -> np.ndarray:
+    """a(|v|) = min(a_max, ω_max |v|) for velocities (N, 2)."""
+    return np.minimum(a_max, omega_max * np.hypot(velocity[:, 0], velocity[:, 1]))
+
+
 def manoeuvre_covariance(
     velocity: np.ndarray, tau: np.ndarray, a_max: float, omega_max: float
 ) -> np.ndarray:
@@ -68,7 +73,7 @@ def manoeuvre_covariance(
     velocity = np.asarray(velocity, dtype=float).reshape(-1, 2)
     tau = np.asarray(tau, dtype=float).reshape(-1)
     speed = np.hypot(velocity[:, 0], velocity[:, 1])
-    a = np.minimum(a_max, omega_max * speed)
+    a = _acceleration_bound(velocity, a_max, omega_max)
     u = velocity / np.where(speed > 0, speed, 1.0)[:, None]
     n = np.stack([-u[:, 1], u[:, 0]], axis=1)
     A = n[:, :, None] * n[:, None, :] + ALONG_TRACK_FRACTION**2 * (u[:, :, None] * u[:, None, :])
@@ -124,7 +129,7 @@ def manoeuvre_search(
     # searched already: its across-track std, a/√3 · τ²/2, above half the largest predicted
     # position std. (Slow targets in the reference scenario never get there; the cut leaves
     # the mixed-speed scenarios' answers as they are and saves 4/5 of the search's time.)
-    a = np.minimum(a_max, omega_max * np.hypot(x_comb[:, 2], x_comb[:, 3]))
+    a = _acceleration_bound(x_comb[:, 2:4], a_max, omega_max)
     reach = (a * a / 3.0) * (tau**4 / 4.0)
     wide = np.flatnonzero(reach > REACH_FRACTION**2 * max_eigenvalue_2x2(P_comb[:, :2, :2]))
     if wide.size == 0:
