@@ -26,6 +26,19 @@ def _patterns(run: BendingRun) -> dict[str, Any]:
     return {"five": run.patterns[0].tolist(), "four": run.patterns[1].tolist()}
 
 
+def _configure_patterns(
+    http: httpx.Client, service: RunningService, run: BendingRun
+) -> httpx.Response:
+    """PATCH the run's two patterns into the service's configuration; the 200 response."""
+    r = http.patch(
+        "/api/v1/config",
+        json={"point_patterns": {"patterns": _patterns(run)}},
+        headers=service.auth,
+    )
+    assert r.status_code == 200, r.text
+    return r
+
+
 def _batches(run: BendingRun) -> list[bytes]:
     out = []
     for sc in run.scans:
@@ -70,12 +83,7 @@ def test_patterns_are_checked_merged_by_name_and_removed_by_null(service: Runnin
             assert r.status_code == 422, (patterns, r.text)
             assert where in r.json()["detail"]
         assert http.get("/api/v1/config").json() == doc  # nothing changed
-        r = http.patch(
-            "/api/v1/config",
-            json={"point_patterns": {"patterns": _patterns(run)}},
-            headers=service.auth,
-        )
-        assert r.status_code == 200, r.text
+        r = _configure_patterns(http, service, run)
         assert set(r.json()["point_patterns"]["patterns"]) == {"five", "four"}
         tri = {"tri": [[0, 0], [10, 0], [0, 10]]}
         r = http.patch(
@@ -93,12 +101,7 @@ def test_patterns_are_checked_merged_by_name_and_removed_by_null(service: Runnin
 def test_the_bending_target_is_listed_with_attitude_and_shapes(service: RunningService) -> None:
     run = bending_scenario(1)
     with httpx.Client(base_url=service.url, timeout=10) as http:
-        r = http.patch(
-            "/api/v1/config",
-            json={"point_patterns": {"patterns": _patterns(run)}},
-            headers=service.auth,
-        )
-        assert r.status_code == 200
+        _configure_patterns(http, service, run)
         results = run_batches(service.engine, _batches(run))
         assert all(res.accepted for res in results)
         tracks = http.get("/api/v1/tracks", params={"kind": "extended"}).json()["tracks"]
@@ -120,11 +123,7 @@ def test_start_a_pattern_track_by_hand(service: RunningService) -> None:
         assert http.post(URL, json={**body, "time": 0.0}).status_code == 401
         r = http.post(URL, json={**body, "time": 0.0}, headers=service.auth)
         assert r.status_code == 422 and "five" in r.json()["detail"]  # not configured yet
-        http.patch(
-            "/api/v1/config",
-            json={"point_patterns": {"patterns": _patterns(run)}},
-            headers=service.auth,
-        )
+        _configure_patterns(http, service, run)
         for broken, where in (
             ({**body, "attitude": "x"}, "attitude"),
             ({**body, "position": [1.0]}, "position"),
@@ -157,12 +156,7 @@ def test_pattern_tracks_over_zenoh(service: RunningService, peer: zenoh.Session)
     ``shape_probabilities``."""
     run = bending_scenario(3)
     with httpx.Client(base_url=service.url, timeout=10) as http:
-        r = http.patch(
-            "/api/v1/config",
-            json={"point_patterns": {"patterns": _patterns(run)}},
-            headers=service.auth,
-        )
-        assert r.status_code == 200
+        _configure_patterns(http, service, run)
     reports = Collector(peer, "tracking/tracks")
     errors = Collector(peer, "tracking/errors/**")
     try:
