@@ -257,6 +257,11 @@ def test_rest_config(service: RunningService, peer: zenoh.Session) -> None:
             assert doc["initiation"]["method"] == "two_point"
             assert doc["initiation"]["max_speed"] == 700.0
             assert doc["initiation"]["max_pairs_per_candidate"] == 8
+            assert doc["gating"] == {
+                "gate_probability": 0.9999,
+                "manoeuvre_acceleration": 50.0,
+                "manoeuvre_turn_rate": 0.1,
+            }
             patch = {"ingest": {"max_detections_per_batch": 10}}
 
             r = http.patch("/api/v1/config", json=patch)
