@@ -91,9 +91,11 @@ class MotionConfig:
     ``models`` names the modes, a subset of ``("cv", "ct")`` in that order. ``q_cv`` and
     ``q_ct`` are the white-noise acceleration power spectral densities (m²/s³) of the nearly
     constant velocity and coordinated turn modes; ``q_turn_rate`` the turn-rate noise PSD
-    (rad²/s³) of the coordinated turn mode. ``sojourn_times`` are the mean times (s) spent in
-    each mode; they give the mode transition matrix for any interval ``T`` as
-    ``π_jj = exp(−T/τ_j)``, the rest spread evenly over the other modes.
+    (rad²/s³) of the coordinated turn mode. Beside a coordinated-turn mode the constant
+    velocity mode resets the turn rate to 0 with std ``cv_turn_rate_std`` (rad/s) at each
+    prediction, so that a finished turn's rate does not live on in it. ``sojourn_times`` are
+    the mean times (s) spent in each mode; they give the mode transition matrix for any
+    interval ``T`` as ``π_jj = exp(−T/τ_j)``, the rest spread evenly over the other modes.
     """
 
     models: tuple[str, ...] = _field(
@@ -110,6 +112,14 @@ class MotionConfig:
     )
     q_turn_rate: float = _field(
         1e-4, "turn-rate noise PSD of the coordinated-turn mode, rad²/s³", gt=0, le=1.0
+    )
+    cv_turn_rate_std: float = _field(
+        0.05,
+        "beside a coordinated-turn mode, the constant-velocity mode's turn rate is 0 with this"
+        " std at every prediction: the prior rate of a turn that starts from straight flight,"
+        " rad/s",
+        gt=0,
+        le=10.0,
     )
     sojourn_times: tuple[float, ...] = _field(
         (30.0, 10.0), "mean time spent in each mode, s (one per model)", gt=0, le=1e6, length=(1, 2)

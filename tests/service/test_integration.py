@@ -262,6 +262,7 @@ def test_rest_config(service: RunningService, peer: zenoh.Session) -> None:
                 "manoeuvre_acceleration": 50.0,
                 "manoeuvre_turn_rate": 0.1,
             }
+            assert doc["motion"]["cv_turn_rate_std"] == 0.05
             patch = {"ingest": {"max_detections_per_batch": 10}}
 
             r = http.patch("/api/v1/config", json=patch)

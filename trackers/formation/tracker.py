@@ -48,7 +48,7 @@ from trackers.config import FormationConfig, TrackerConfig
 from trackers.extended.partition import component_labels
 from trackers.filters.imm import imm_combine, imm_predict, imm_update, transition_matrix
 from trackers.formation.template import cell_sizes, match_template
-from trackers.models.motion import ConstantVelocity, CoordinatedTurn
+from trackers.models.motion import ConstantVelocity, CoordinatedTurn, build_models
 from trackers.peers import PeerProposal, PointTrackState, PointTrackView
 from trackers.types import Scan, TrackSnapshot
 
@@ -144,13 +144,7 @@ class _State:
 
 def _models(config: TrackerConfig) -> tuple[ConstantVelocity | CoordinatedTurn, ...]:
     """The members' modes: those of ``motion``, constant velocity with ``formation.q_cv``."""
-    m = config.motion
-    return tuple(
-        ConstantVelocity(config.formation.q_cv)
-        if name == "cv"
-        else CoordinatedTurn(m.q_ct, m.q_turn_rate)
-        for name in m.models
-    )
+    return build_models(config.motion, q_cv=config.formation.q_cv)
 
 
 def _new_formation(

@@ -6,8 +6,9 @@ All functions are batched over any leading dimensions (typically ``N`` tracks), 
 arrays and never modify their inputs.
 
 - :class:`ConstantVelocity`: nearly constant velocity, discretized continuous white-noise
-  acceleration (Bar-Shalom, Li and Kirubarajan 2001, section 6.2). ω is carried unchanged,
-  without noise, and does not influence the motion.
+  acceleration (Bar-Shalom, Li and Kirubarajan 2001, section 6.2). ω does not influence the
+  motion; it is carried unchanged, or, in an IMM beside a coordinated turn, reset to
+  ``N(0, σ_ω²)``: the prior turn rate of a turn that starts from straight flight.
 - :class:`CoordinatedTurn`: coordinated turn with the turn rate in the state, linearized with
   its exact Jacobian for an EKF (ibid., section 11.7).
 
@@ -192,22 +193,39 @@ class ConstantVelocity:
     """Nearly constant velocity (white-noise acceleration) on ``[x, y, vx, vy, ω]``.
 
     ``q`` is the continuous white-noise acceleration power spectral density in m²/s³, the
-    same on both axes. The turn rate ω is carried unchanged with no process noise.
+    same on both axes. Without ``turn_rate_std`` the turn rate ω is carried unchanged with no
+    process noise. With it (σ_ω, rad/s) the mode says what it means, that the target does not
+    turn: ``ω⁻ = w``, ``w ~ N(0, σ_ω²)`` (row 4 of F zero, ``Q₄₄ = σ_ω²``). In an IMM this
+    keeps a finished turn's rate from living on in the constant-velocity mode and coming back
+    into the coordinated-turn mode through the mixing; σ_ω is then the prior rate of the
+    next turn.
     """
 
     name = "cv"
 
-    def __init__(self, q: float) -> None:
+    def __init__(self, q: float, turn_rate_std: float | None = None) -> None:
         self.q = _check_psd("q", q)
+        self.turn_rate_std = (
+            None if turn_rate_std is None else _check_psd("turn_rate_std", turn_rate_std)
+        )
 
     def __repr__(self) -> str:
-        return f"ConstantVelocity(q={self.q!r})"
+        if self.turn_rate_std is None:
+            return f"ConstantVelocity(q={self.q!r})"
+        return f"ConstantVelocity(q={self.q!r}, turn_rate_std={self.turn_rate_std!r})"
+
+    def _noise(self, dt: float) -> np.ndarray:
+        Q = _acceleration_noise(self.q, dt)
+        if self.turn_rate_std is not None and dt > 0.0:
+            Q[4, 4] = self.turn_rate_std**2
+        return Q
 
     def transition(self, x: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:
         """The transition ``f(x) = F x`` and its Jacobian ``F`` (one copy per track).
 
-        ``F = [[1,0,T,0,0], [0,1,0,T,0], [0,0,1,0,0], [0,0,0,1,0], [0,0,0,0,1]]``, i.e.
-        ``x⁻ = x + T vx``, ``y⁻ = y + T vy``, velocities and ω unchanged.
+        ``F = [[1,0,T,0,0], [0,1,0,T,0], [0,0,1,0,0], [0,0,0,1,0], [0,0,0,0,f]]``, i.e.
+        ``x⁻ = x + T vx``, ``y⁻ = y + T vy``, velocities unchanged, ``ω⁻ = f ω`` with ``f = 1``,
+        or ``f = 0`` when the mode has a ``turn_rate_std`` (and ``T > 0``).
         x ``(..., 5)`` → ``(f(x) (..., 5), F (..., 5, 5))``.
         """
         dt = _check_dt(dt)
@@ -216,11 +234,15 @@ class ConstantVelocity:
         x_new[..., 0:2] += dt * x[..., 2:4]
         F = np.eye(STATE_DIM)
         F[0, 2] = F[1, 3] = dt
+        if self.turn_rate_std is not None and dt > 0.0:
+            x_new[..., 4] = 0.0
+            F[4, 4] = 0.0
         return x_new, np.broadcast_to(F, (*x.shape[:-1], STATE_DIM, STATE_DIM)).copy()
 
     def process_noise(self, x: np.ndarray, dt: float) -> np.ndarray:
-        """``Q = q [[T³/3, T²/2], [T²/2, T]]`` on (x, vx) and (y, vy), zero on ω; (..., 5, 5)."""
-        return _broadcast_noise(_acceleration_noise(self.q, _check_dt(dt)), x)
+        """``Q = q [[T³/3, T²/2], [T²/2, T]]`` on (x, vx) and (y, vy); ``Q₄₄ = σ_ω²`` (or 0
+        without a ``turn_rate_std``), the rest 0; (..., 5, 5)."""
+        return _broadcast_noise(self._noise(_check_dt(dt)), x)
 
     def predict(self, x: np.ndarray, P: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:
         """``x⁻ = F x``, ``P⁻ = F P Fᵀ + Q`` (symmetrized); x (..., 5), P (..., 5, 5).
@@ -250,7 +272,11 @@ class ConstantVelocity:
         corner *= 0.5
         out[0, 1] = corner
         out[1, 0] = corner
-        _add_noise(out, _acceleration_noise(self.q, dt))
+        if self.turn_rate_std is not None:  # row and column 4 of F are zero
+            x_pred[4] = 0.0
+            out[4] = 0.0
+            out[:, 4] = 0.0
+        _add_noise(out, self._noise(dt))
         return x_pred, out
 
 
@@ -426,12 +452,17 @@ class CoordinatedTurn:
         return x_pred, FP
 
 
-def build_models(config: MotionConfig) -> tuple[ConstantVelocity | CoordinatedTurn, ...]:
-    """The motion models named by ``config.models``, in that order."""
+def build_models(
+    config: MotionConfig, q_cv: float | None = None
+) -> tuple[ConstantVelocity | CoordinatedTurn, ...]:
+    """The motion models named by ``config.models``, in that order; ``q_cv`` (if given)
+    replaces ``config.q_cv``. Beside a coordinated-turn mode the constant-velocity mode
+    resets the turn rate with ``config.cv_turn_rate_std``; alone it carries it."""
+    cv_turn_rate_std = config.cv_turn_rate_std if "ct" in config.models else None
     models: list[ConstantVelocity | CoordinatedTurn] = []
     for name in config.models:
         if name == "cv":
-            models.append(ConstantVelocity(config.q_cv))
+            models.append(ConstantVelocity(config.q_cv if q_cv is None else q_cv, cv_turn_rate_std))
         elif name == "ct":
             models.append(CoordinatedTurn(config.q_ct, config.q_turn_rate))
         else:  # MotionConfig validates the names; guard against a hand-built one

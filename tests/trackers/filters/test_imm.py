@@ -268,6 +268,59 @@ def test_imm_matches_filterpy_cv_and_ct_ekf() -> None:
     assert mus[-5:, 1].mean() > 0.7 and mus[-5:, 1].mean() > mus[3:9, 1].mean() + 0.3
 
 
+def test_imm_matches_filterpy_with_the_cv_mode_resetting_the_turn_rate() -> None:
+    # The CV mode with a turn-rate std is the linear model ω⁻ = w, w ~ N(0, σ_ω²): row 4 of F
+    # zero and Q₄₄ = σ_ω², which a plain FilterPy KalmanFilter runs as written.
+    T, sigma_omega = 1.0, 0.03
+    q_cv, q_ct, q_turn = 0.1, 1.0, 1e-3
+    R = np.diag([25.0, 16.0])
+    x0 = np.array([0.0, 0.0, 35.0, 5.0, 0.02])
+    P0 = np.diag([100.0, 100.0, 100.0, 100.0, 0.01])
+    zs = turning_measurements(30, T, seed=3)
+    Pi = transition_matrix([20.0, 10.0], T)
+    cv = cv_filter(q_cv, T, x0, P0, R)
+    cv.F[4, 4] = 0.0
+    cv.Q[4, 4] = sigma_omega**2
+    filters = [cv, CoordinatedTurnEKF(q_ct, q_turn, T, x0, P0, R)]
+    models = (ConstantVelocity(q_cv, sigma_omega), CoordinatedTurn(q_ct, q_turn))
+    mus = run_against_filterpy(models, filters, x0, P0, np.array([0.7, 0.3]), Pi, T, zs, R)
+    assert mus[-5:, 1].mean() > 0.7
+
+
+def test_a_finished_turn_does_not_live_on_in_the_cv_mode() -> None:
+    # A 0.12 rad/s turn, then 25 s of straight flight. Carried unchanged, the turn's rate stays
+    # in the CV mode's state (nothing there observes it) and comes back into the CT mode through
+    # the mixing; reset to N(0, σ_ω²) at each prediction it is gone from both modes.
+    T, R = 1.0, np.diag([25.0, 25.0])
+    rng = np.random.default_rng(8)
+    state = np.array([0.0, 0.0, 40.0, 10.0, 0.0])
+    truth = []
+    for k in range(45):
+        state[4] = 0.12 if 5 <= k < 20 else 0.0
+        x_next, _ = CoordinatedTurn(1.0, 1e-3).transition(state[None], T)
+        state = x_next[0]
+        truth.append(state.copy())
+    zs = np.array([s[:2] for s in truth]) + rng.normal(scale=5.0, size=(len(truth), 2))
+    Pi = transition_matrix([30.0, 10.0], T)
+
+    def final_turn_rates(cv: ConstantVelocity) -> np.ndarray:
+        models = (cv, CoordinatedTurn(2.0, 1e-4))
+        x = np.array([[[0.0, 0.0, 40.0, 10.0, 0.0]] * 2])
+        P = np.diag([100.0, 100.0, 100.0, 100.0, 0.05**2])[None, None].repeat(2, axis=1)
+        mu = np.array([[0.9, 0.1]])
+        for z in zs:
+            xp, Pp, cb = imm_predict(models, x, P, mu, Pi, T)
+            x, P, mu, _ = imm_update(xp, Pp, cb, z[None], R[None], H_POSITION)
+        return x[0, :, 4]
+
+    carried = final_turn_rates(ConstantVelocity(0.5))
+    reset = final_turn_rates(ConstantVelocity(0.5, 0.05))
+    # Carried: both modes still hold most of the finished turn's 0.12 rad/s (0.116, 0.109).
+    assert carried[0] > 0.08 and carried[1] > 0.08
+    # Reset: the CV mode's rate is 0, the CT mode's is its own estimate, near 0 (0.014).
+    assert reset[0] == 0.0 and abs(reset[1]) < 0.03
+
+
 # --- batching, floors, robustness --------------------------------------------------------------
 
 

@@ -113,7 +113,41 @@ def test_cv_turn_rate_is_carried_without_noise() -> None:
     np.testing.assert_allclose(P_pred[:, 4, 4], P[:, 4, 4], rtol=1e-15)
 
 
-@pytest.mark.parametrize("model", [ConstantVelocity(1.0), CoordinatedTurn(1.0, 0.01)])
+def test_cv_with_turn_rate_std_resets_the_turn_rate() -> None:
+    # ω⁻ = w, w ~ N(0, σ²): F as for CV except F₄₄ = 0, Q as for CV plus Q₄₄ = σ².
+    rng = np.random.default_rng(13)
+    x = random_states(rng, 6)
+    P = random_spd(rng, 6)
+    T, sigma = 1.7, 0.04
+    model = ConstantVelocity(0.6, turn_rate_std=sigma)
+    F, Q = cv_matrices(0.6, T)
+    F[4, 4] = 0.0
+    Q[4, 4] = sigma**2
+    fx, F_model = model.transition(x, T)
+    np.testing.assert_array_equal(F_model, np.broadcast_to(F, (6, 5, 5)))
+    np.testing.assert_allclose(fx, x @ F.T, rtol=1e-15, atol=1e-12)
+    np.testing.assert_allclose(model.process_noise(x, T), np.broadcast_to(Q, (6, 5, 5)))
+    x_pred, P_pred = model.predict(x, P, T)
+    np.testing.assert_allclose(x_pred, x @ F.T, rtol=1e-14, atol=1e-12)
+    np.testing.assert_allclose(P_pred, F @ P @ F.T + Q, rtol=1e-13, atol=1e-12)
+    assert np.all(x_pred[:, 4] == 0.0) and np.all(P_pred[:, 4, :4] == 0.0)
+    np.testing.assert_array_equal(P_pred[:, 4, 4], sigma**2)
+    with pytest.raises(ValueError, match="turn_rate_std"):
+        ConstantVelocity(1.0, turn_rate_std=-0.1)
+
+
+def test_build_models_resets_the_cv_turn_rate_only_beside_a_turn_mode() -> None:
+    both = build_models(MotionConfig(cv_turn_rate_std=0.02))
+    assert both[0].turn_rate_std == 0.02
+    alone = build_models(
+        MotionConfig(models=("cv",), sojourn_times=(30.0,), initial_mode_probabilities=(1.0,))
+    )
+    assert alone[0].turn_rate_std is None
+
+
+@pytest.mark.parametrize(
+    "model", [ConstantVelocity(1.0), ConstantVelocity(1.0, 0.05), CoordinatedTurn(1.0, 0.01)]
+)
 def test_zero_dt_returns_inputs_unchanged(model: ConstantVelocity | CoordinatedTurn) -> None:
     rng = np.random.default_rng(4)
     x = random_states(rng, 3)
