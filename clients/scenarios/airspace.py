@@ -101,7 +101,8 @@ class ScriptedScenario:
         return {i: t.target_class for i, t in enumerate(self.targets)}
 
 
-def _turn_rate(target: ScriptedTarget, t: float) -> float:
+def turn_rate_at(target: ScriptedTarget, t: float) -> float:
+    """The target's scripted turn rate (rad/s) at time ``t``: its manoeuvre's, or 0."""
     for m in target.manoeuvres:
         if m.start <= t < m.start + m.duration:
             return m.turn_rate
@@ -116,7 +117,7 @@ def _propagate(
         | {c for m in target.manoeuvres for c in (m.start, m.start + m.duration) if t0 < c < t1}
     )
     for a, b in itertools.pairwise(cuts):
-        state = move_targets(state[None, :], np.array([_turn_rate(target, a)]), b - a)[0]
+        state = move_targets(state[None, :], np.array([turn_rate_at(target, a)]), b - a)[0]
     T = t1 - t0
     if target.q > 0 and T > 0:
         state = state + ncv_noise(rng, target.q, T, 1)[0]
