@@ -308,6 +308,7 @@ class IndividualTracker:
         tracks = pred.tracks
         claims = np.full(scan.size, -np.inf)
         masked = np.zeros(0)  # each old track's P_D / the sensor's, below 1 inside a peer's cell
+        rivals = np.zeros(0, dtype=bool)  # tentative tracks that lost to a rival of their origin
         if len(tracks):
             pd = np.full(len(tracks), pd_sensor)
             if directives.pd:
@@ -317,9 +318,7 @@ class IndividualTracker:
                         pd[i] = p
             masked = np.minimum(pd / pd_sensor, 1.0)
             tracks, claims = self._update_existing(pred, scan, pd, lam_fa)
-            best = _best_of_each_origin(tracks)
-            tracks = tracks.take(best)
-            masked = masked[best]
+            rivals = ~_best_of_each_origin(tracks)  # dropped with the deleted tracks below
 
         if config.initiation.method == "two_point":
             born, candidates = self._initiate_two_point(
@@ -342,6 +341,7 @@ class IndividualTracker:
         status = sequential_test(tracks.score, tracks.peak, tracks.confirmed, coast, tm)
         delete = status.delete
         delete[n_old:] = False  # a track is never deleted in the scan that starts or adopts it
+        delete[:n_old] |= rivals  # tentative, so not among the deleted ids
         deleted_ids = renamed + tuple(tracks.ids[delete & tracks.confirmed].tolist())
         tracks = replace(tracks, confirmed=status.confirmed | (tracks.confirmed & ~delete))
         tracks = _frozen(tracks.take(~delete))

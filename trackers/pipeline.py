@@ -121,24 +121,10 @@ def check_scan(scan: Scan, last_time: float | None) -> None:
             f"time {scan.time} is older than the last processed time {last_time}",
         )
     if scan.size:
-        bad = np.flatnonzero(~np.isfinite(scan.z).all(axis=1))
-        if bad.size:
-            raise ScanRejected("invalid_scan", f"detections[{bad[0]}]: position not finite")
-        bad = np.flatnonzero((np.abs(scan.z) > MAX_ABS_POSITION).any(axis=1))
-        if bad.size:
-            raise ScanRejected(
-                "invalid_scan",
-                f"detections[{bad[0]}]: position beyond ±{MAX_ABS_POSITION:g} m",
-            )
         R = scan.R
-        bad = np.flatnonzero(~np.isfinite(R).all(axis=(1, 2)))
-        if bad.size:
-            raise ScanRejected("invalid_scan", f"detections[{bad[0]}].cov: not finite")
-        bad = np.flatnonzero((np.abs(R) > MAX_VARIANCE).any(axis=(1, 2)))
-        if bad.size:
-            raise ScanRejected(
-                "invalid_scan", f"detections[{bad[0]}].cov: an entry above {MAX_VARIANCE:g} m²"
-            )
+        # NaN fails both comparisons too: then the checks below name the first bad detection.
+        if not (np.abs(scan.z).max() <= MAX_ABS_POSITION and np.abs(R).max() <= MAX_VARIANCE):
+            _check_magnitudes(scan.z, R)
         asym = np.abs(R[:, 0, 1] - R[:, 1, 0]) > 1e-9 * (1.0 + np.abs(R[:, 0, 1]))
         det = R[:, 0, 0] * R[:, 1, 1] - R[:, 0, 1] * R[:, 1, 0]
         bad = np.flatnonzero(asym | (R[:, 0, 0] <= 0) | (det <= 0))
@@ -152,6 +138,28 @@ def check_scan(scan: Scan, last_time: float | None) -> None:
         math.isfinite(scan.clutter_density) and scan.clutter_density > 0
     ):
         raise ScanRejected("invalid_scan", "clutter_density: must be a finite number > 0")
+
+
+def _check_magnitudes(z: np.ndarray, R: np.ndarray) -> None:
+    """Raise :class:`ScanRejected` naming the first detection with a position or covariance
+    entry that is not finite or too large."""
+    bad = np.flatnonzero(~np.isfinite(z).all(axis=1))
+    if bad.size:
+        raise ScanRejected("invalid_scan", f"detections[{bad[0]}]: position not finite")
+    bad = np.flatnonzero((np.abs(z) > MAX_ABS_POSITION).any(axis=1))
+    if bad.size:
+        raise ScanRejected(
+            "invalid_scan",
+            f"detections[{bad[0]}]: position beyond ±{MAX_ABS_POSITION:g} m",
+        )
+    bad = np.flatnonzero(~np.isfinite(R).all(axis=(1, 2)))
+    if bad.size:
+        raise ScanRejected("invalid_scan", f"detections[{bad[0]}].cov: not finite")
+    bad = np.flatnonzero((np.abs(R) > MAX_VARIANCE).any(axis=(1, 2)))
+    if bad.size:
+        raise ScanRejected(
+            "invalid_scan", f"detections[{bad[0]}].cov: an entry above {MAX_VARIANCE:g} m²"
+        )
 
 
 class PipelineCheckpoint:

@@ -65,21 +65,25 @@ def transition_matrix(sojourn_times: Sequence[float], dt: float) -> np.ndarray:
     M = 1. ``Pi[i, j]`` is the probability of being in mode j now given mode i at the
     previous time; every row sums to 1. ``dt = 0`` gives the identity.
     """
-    tau = np.asarray(sojourn_times, dtype=float).reshape(-1)
+    # Plain floats: the IMM needs this every scan, for a handful of modes.
+    tau = [float(t) for t in np.asarray(sojourn_times, dtype=float).reshape(-1)]
     dt = float(dt)
-    if tau.size == 0:
+    if not tau:
         raise ValueError("sojourn_times: at least one mode")
-    if not np.all(np.isfinite(tau) & (tau > 0)):
-        raise ValueError(f"sojourn_times: must be finite and > 0, got {tau.tolist()!r}")
+    if not all(math.isfinite(t) and t > 0 for t in tau):
+        raise ValueError(f"sojourn_times: must be finite and > 0, got {tau!r}")
     if not (math.isfinite(dt) and dt >= 0):
         raise ValueError(f"dt: must be a finite number >= 0, got {dt!r}")
-    M = tau.size
+    M = len(tau)
     if M == 1:
         return np.ones((1, 1))
-    stay = np.exp(-dt / tau)
-    Pi = np.repeat(((1.0 - stay) / (M - 1))[:, None], M, axis=1)
-    Pi[np.arange(M), np.arange(M)] = stay
-    return Pi
+    rows = []
+    for i, t in enumerate(tau):
+        stay = math.exp(-dt / t)
+        row = [(1.0 - stay) / (M - 1)] * M
+        row[i] = stay
+        rows.append(row)
+    return np.array(rows)
 
 
 def _add_spread(out: np.ndarray, tmp: np.ndarray, xs: np.ndarray, w: np.ndarray) -> None:
