@@ -242,12 +242,6 @@ class GatingConfig:
         gt=0,
         le=10.0,
     )
-    manoeuvre_acceleration: float = _field(
-        50.0,
-        "a confirmed track with nothing in its gate searches the reach of this acceleration, m/s²",
-        ge=0,
-        le=1e4,
-    )
 
     def __post_init__(self) -> None:
         _check_bounds(self, "gating")
