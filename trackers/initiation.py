@@ -53,7 +53,7 @@ import numpy as np
 
 from trackers.association.gating import max_eigenvalue_2x2
 from trackers.association.spatial import BRUTE_FORCE_CELLS, pairs_within
-from trackers.rows import RowArrays
+from trackers.rows import RowArrays, sort_within_groups
 
 __all__ = [
     "Candidates",
@@ -422,9 +422,8 @@ def pair_candidates(
         if ci.size == 0:
             return _no_pairs()
     # The ``max_pairs`` best of each candidate are kept, best first.
-    order = np.lexsort((-T[_SCORE].take(cols), ci))
+    order, rank = sort_within_groups(ci, T[_SCORE].take(cols))
     if ci.size > max_pairs:
-        rank = np.arange(ci.size) - ci.searchsorted(ci)  # ci is sorted: ci[order] == ci
         order = order[rank < max_pairs]
     ci, fj, cols = ci[order], fj[order], cols[order]
     T = T.take(np.concatenate((cols, cols)), axis=1)  # each pair twice: slow, fast
