@@ -149,6 +149,7 @@ def main(argv: list[str] | None = None) -> int:
     print("false confirmed tracks per scan (displaced: a target's own track > 150 m off;")
     print(f"spurious: the rest); median tracker ms per scan; {args.seeds} seeds")
     for title, make in scenarios.items():
+        one_radar = len(make(0).radars) == 1
         print(f"== {title}")
         for name, config in configs.items():
             runs = [run(make(seed), config) for seed in range(args.seeds)]
@@ -159,10 +160,10 @@ def main(argv: list[str] | None = None) -> int:
                 f"   {name:<13} rate {rate:.3f}  false/scan {false:.3f} (displaced "
                 f"{displaced:.3f}, spurious {false - displaced:.3f})  {ms:.2f} ms  | {classes}"
             )
-            if len(make(0).radars) > 1:
+            if not one_radar:
                 first_batches = _pooled([b for _, _, b in runs])[0]
                 print(f"   {'':<13} rate after the first 8 batches instead: {first_batches:.3f}")
-        if len(make(0).radars) == 1:
+        if one_radar:
             floors = np.mean([coasting_floor(make(seed)) for seed in range(args.seeds)], axis=0)
             print(
                 f"   {'floor':<13} a target missed > 150 m from its true state at its last"

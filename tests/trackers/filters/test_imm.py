@@ -252,7 +252,10 @@ def test_imm_matches_filterpy_two_cv_models() -> None:
     assert mus[:8, 0].mean() > 0.5 and mus[-8:, 1].mean() > 0.5
 
 
-def test_imm_matches_filterpy_cv_and_ct_ekf() -> None:
+@pytest.mark.parametrize("sigma_omega", [None, 0.03])
+def test_imm_matches_filterpy_cv_and_ct_ekf(sigma_omega: float | None) -> None:
+    # With a turn-rate std the CV mode is the linear model ω⁻ = w, w ~ N(0, σ_ω²): row 4 of
+    # F zero and Q₄₄ = σ_ω², which a plain FilterPy KalmanFilter runs as written.
     T = 1.0
     q_cv, q_ct, q_turn = 0.1, 1.0, 1e-3
     R = np.diag([25.0, 16.0])
@@ -261,30 +264,15 @@ def test_imm_matches_filterpy_cv_and_ct_ekf() -> None:
     zs = turning_measurements(30, T, seed=2)
     Pi = transition_matrix([20.0, 10.0], T)
     mu0 = np.array([0.7, 0.3])
-    filters = [cv_filter(q_cv, T, x0, P0, R), CoordinatedTurnEKF(q_ct, q_turn, T, x0, P0, R)]
-    models = (ConstantVelocity(q_cv), CoordinatedTurn(q_ct, q_turn))
+    cv = cv_filter(q_cv, T, x0, P0, R)
+    if sigma_omega is not None:
+        cv.F[4, 4] = 0.0
+        cv.Q[4, 4] = sigma_omega**2
+    filters = [cv, CoordinatedTurnEKF(q_ct, q_turn, T, x0, P0, R)]
+    models = (ConstantVelocity(q_cv, sigma_omega), CoordinatedTurn(q_ct, q_turn))
     mus = run_against_filterpy(models, filters, x0, P0, mu0, Pi, T, zs, R)
     # The turn is recognised: the CT mode dominates at the end, much more than in straight flight.
     assert mus[-5:, 1].mean() > 0.7 and mus[-5:, 1].mean() > mus[3:9, 1].mean() + 0.3
-
-
-def test_imm_matches_filterpy_with_the_cv_mode_resetting_the_turn_rate() -> None:
-    # The CV mode with a turn-rate std is the linear model ω⁻ = w, w ~ N(0, σ_ω²): row 4 of F
-    # zero and Q₄₄ = σ_ω², which a plain FilterPy KalmanFilter runs as written.
-    T, sigma_omega = 1.0, 0.03
-    q_cv, q_ct, q_turn = 0.1, 1.0, 1e-3
-    R = np.diag([25.0, 16.0])
-    x0 = np.array([0.0, 0.0, 35.0, 5.0, 0.02])
-    P0 = np.diag([100.0, 100.0, 100.0, 100.0, 0.01])
-    zs = turning_measurements(30, T, seed=3)
-    Pi = transition_matrix([20.0, 10.0], T)
-    cv = cv_filter(q_cv, T, x0, P0, R)
-    cv.F[4, 4] = 0.0
-    cv.Q[4, 4] = sigma_omega**2
-    filters = [cv, CoordinatedTurnEKF(q_ct, q_turn, T, x0, P0, R)]
-    models = (ConstantVelocity(q_cv, sigma_omega), CoordinatedTurn(q_ct, q_turn))
-    mus = run_against_filterpy(models, filters, x0, P0, np.array([0.7, 0.3]), Pi, T, zs, R)
-    assert mus[-5:, 1].mean() > 0.7
 
 
 def test_a_finished_turn_does_not_live_on_in_the_cv_mode() -> None:
