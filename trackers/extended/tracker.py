@@ -511,10 +511,13 @@ class ExtendedTracker:
             est = predict(track.estimate, dt, cfg.q, cfg.tau)
             subsets: list[list[int]] = []
             points: dict[int, tuple[float, ...]] = {}
+            inside: dict[int, float] | None = None
             if tree is not None:
-                subsets, points = _gated_subsets(est, scan, tree, R_mean, claimed, point_gates, cfg)
+                subsets, points, inside = _gated_subsets(
+                    est, scan, tree, R_mean, claimed, point_gates, cfg
+                )
             gain, chosen, parts, left_out, fitted = _likeliest(
-                track, est, scan, subsets, points, cfg, log_lam
+                track, est, scan, subsets, points, cfg, log_lam, inside
             )
             score = track.score + gain
             evidence, split, split_c, split_d, split_v = _split_evidence(
@@ -772,14 +775,16 @@ def _gated_subsets(
     claimed: np.ndarray,
     point_gates: Callable[[], _PointGates],
     cfg: ExtendedConfig,
-) -> tuple[list[list[int]], dict[int, tuple[float, ...]]]:
+) -> tuple[list[list[int]], dict[int, tuple[float, ...]], dict[int, float] | None]:
     """The detections a track predicted to ``est`` may take, as resolution subsets (rows of
     the scan, in the k-d tree's order): of the unclaimed detections near it, less the one
     nearest to each confirmed individual track not moving with it (velocities more than
     ``group_speed_spread`` apart), the subsets with a detection in its gate
-    ``(yⱼ − H x)ᵀ (H P Hᵀ + z X + Rⱼ)⁻¹ (yⱼ − H x) ≤ gate_threshold``, whole (a bending
+    ``mⱼ = (yⱼ − H x)ᵀ (H P Hᵀ + z X + Rⱼ)⁻¹ (yⱼ − H x) ≤ gate_threshold``, whole (a bending
     column). Near: within 1.5 times the radius of the gate with the scan's mean ``R̄`` plus a
-    resolution distance. Also returns the near detections as :func:`_points` gives them."""
+    resolution distance. Also returns the near detections as :func:`_points` gives them, and
+    ``mⱼ`` of each detection of the subsets that lies in the gate when the gate's radius (with
+    ``R̄``) is less than the resolution distance (else None)."""
     ga, gb, gc = innovation_entries(est, 1, R_mean, cfg.z_scale)  # H P Hᵀ + z X + R̄
     radius = math.sqrt(cfg.gate_threshold * (0.5 * (ga + gc) + _hypot(0.5 * (ga - gc), gb)))
     c0, c1, v0, v1 = est.x.tolist()
@@ -787,7 +792,7 @@ def _gated_subsets(
     near = np.asarray(tree.query_ball_point((c0, c1), reach), dtype=np.intp)
     near = near[~claimed[near]]
     if near.size == 0:
-        return [], {}
+        return [], {}, None
     points = _points(scan, near)
     rows = near.tolist()
     (pa, _), (_, pc) = est.P[2:4, 2:4].tolist()
@@ -798,16 +803,26 @@ def _gated_subsets(
         rows = [r for r in rows if r not in theirs]
     (r00, r01), (_, r11) = R_mean.tolist()
     ha, hb, hc = ga - r00, gb - r01, gc - r11  # the gate less R̄, to which each Rⱼ is added
-    gated = []
+    m = []
     for r in rows:
         x, y, ra, rb, _, rc = points[r]
         x, y = x - c0, y - c1
         a, b, c = ha + ra, hb + rb, hc + rc
-        gated.append(
-            (c * x * x - 2.0 * b * x * y + a * y * y) / (a * c - b * b) <= cfg.gate_threshold
-        )
-    subsets = point_subsets([points[r][:2] for r in rows], cfg.resolution_distance)
-    return [[rows[k] for k in s] for s in subsets if any(gated[k] for k in s)], points
+        m.append((c * x * x - 2.0 * b * x * y + a * y * y) / (a * c - b * b))
+    gated = [mk <= cfg.gate_threshold for mk in m]
+    subsets = [
+        s
+        for s in point_subsets([points[r][:2] for r in rows], cfg.resolution_distance)
+        if any(gated[k] for k in s)
+    ]
+    # An object whose gate is narrower than the resolution distance cannot reach beyond it
+    # through detections of its own: what a subset chains to out there is someone else's.
+    inside = (
+        {rows[k]: m[k] for s in subsets for k in s if gated[k]}
+        if radius < cfg.resolution_distance
+        else None
+    )
+    return [[rows[k] for k in s] for s in subsets], points, inside
 
 
 def _likeliest(
@@ -818,17 +833,24 @@ def _likeliest(
     points: dict[int, tuple[float, ...]],
     cfg: ExtendedConfig,
     log_lam: float,
+    inside: dict[int, float] | None,
 ) -> tuple[float, list[int], list[list[int]], list[list[int]], tuple[np.ndarray, Moments] | None]:
-    """The likeliest of the nested unions of ``subsets`` (ranked by the Mahalanobis distance
-    of each subset's centroid to the predicted one, under ``H P Hᵀ + z X + R̄`` over the
-    square root of the subset's size, ``R̄`` the mean over all the subsets) and of no
-    detection at all, by
+    """The likeliest candidate set of detections, by
 
-        ΔL(W) = ln Poisson(|W|; γ) + ln f(W) − |W| ln λ_fa,    ΔL(∅) = −γ.
+        ΔL(W) = ln Poisson(|W|; γ) + ln f(W) − |W| ln λ_fa,    ΔL(∅) = −γ
 
-    Returns ``ΔL``, the union's rows (ascending), the subsets in it and the subsets of at
-    least two detections left out of it, and its mean ``R`` and :func:`moments` (None for
-    no detection)."""
+    (no detection at all is a candidate too). The candidates are the nested unions of
+    ``subsets`` (ranked by the Mahalanobis distance of each subset's centroid to the
+    predicted one, under ``H P Hᵀ + z X + R̄`` over the square root of the subset's size,
+    ``R̄`` the mean over all the subsets) and, when the subsets hold detections outside the
+    gate of an object smaller than the resolution distance (``inside`` not None: a
+    resolution subset chains it to clutter, a buoy or another target up to a resolution
+    distance away), the nested unions of the detections ``inside`` the gate alone, ranked by
+    their ``mⱼ``.
+
+    Returns ``ΔL``, the union's rows (ascending), the parts of the subsets in it and the
+    subsets of at least two detections left out of it, and its mean ``R`` and
+    :func:`moments` (None for no detection)."""
     gain = -track.gamma  # ΔL(∅)
     if not subsets:
         return gain, [], [], [], None
@@ -842,11 +864,19 @@ def _likeliest(
         root = max(1, len(s)) ** 0.5
         a, b, c = (g / root for g in G1)
         fit.append((c * x * x - 2.0 * b * x * y + a * y * y) / (a * c - b * b))
+    order = sorted(range(len(subsets)), key=fit.__getitem__)
+    candidates = [[r for r in subsets[k]] for k in order]
+    if inside is not None and len(inside) < len(rows):  # some lie outside the gate
+        candidates.extend([[r] for r in sorted(inside, key=inside.__getitem__)])
+        fine_from = len(order)
+    else:
+        fine_from = len(candidates)
     best, chosen, R_best, mom_best = -1, [], None, None
     union: list[int] = []
-    order = sorted(range(len(subsets)), key=fit.__getitem__)
-    for k, s in enumerate(order):
-        union.extend(subsets[s])
+    for k, add in enumerate(candidates):
+        if k == fine_from:
+            union = []
+        union.extend(add)
         W = sorted(union)
         Rm = _mean_R(points, W)
         mom = moments(np.take(scan.z, W, axis=0))
@@ -859,9 +889,9 @@ def _likeliest(
             gain, best, chosen, R_best, mom_best = g, k, W, Rm, mom
     if best < 0:
         return gain, [], [], [], None
-    in_best = set(order[: best + 1])
-    parts = [s for k, s in enumerate(subsets) if k in in_best]
-    left_out = [s for k, s in enumerate(subsets) if k not in in_best and len(s) >= 2]
+    taken = set(chosen)
+    parts = [p for p in ([r for r in s if r in taken] for s in subsets) if p]
+    left_out = [s for s in subsets if len(s) >= 2 and not taken.intersection(s)]
     return gain, chosen, parts, left_out, (R_best, mom_best)
 
 

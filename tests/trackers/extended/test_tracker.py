@@ -83,6 +83,32 @@ def test_a_track_started_by_hand_is_confirmed_and_takes_its_detections():
         peer.start(10.0, [0, 0], [0, 0], -np.eye(2))
 
 
+def test_a_small_object_does_not_take_a_buoy_its_resolution_subset_chains_it_to():
+    """A 30 m boat started by hand passes 60-120 m from a static buoy: the buoy's detection
+    shares a resolution subset (200 m) with the boat's, but lies far outside the boat's
+    gate; the boat's track takes its own detection only and keeps its speed."""
+    rng = np.random.default_rng(3)
+    p = TrackingPipeline.all_kinds()
+    peer = next(q for q in p.peers if q.kind == "extended")
+    p.process(Scan("s", 0.0, np.zeros((0, 2)), np.zeros((0, 2, 2)), (), 0.9, 1e-7))
+    track = peer.start(
+        0.0, [0.0, 0.0], [5.0, 0.0], np.diag([15.0**2, 4.0**2]), expected_detections=1.5
+    )
+    buoy = np.array([150.0, 60.0])
+    speeds = []
+    for k in range(1, 30):
+        t = 2.0 * k
+        boat = np.array([5.0 * t, 0.0]) + rng.normal(0, 10.0, 2)
+        z = np.vstack([boat, buoy + rng.normal(0, 10.0, 2)])
+        scan = Scan("s", t, z, np.tile(R, (2, 1, 1)), (f"boat{k}", f"buoy{k}"), 0.9, 1e-7)
+        ext = [x for x in p.process(scan).tracks if x.kind == "extended"]
+        assert [x.id for x in ext] == [track.id]
+        assert ext[0].detection_ids == (f"boat{k}",)
+        speeds.append(ext[0].velocity[0])
+    assert np.hypot(*(np.array(ext[0].position) - [5.0 * t, 0.0])) < 25.0
+    assert abs(np.mean(speeds) - 5.0) < 1.0
+
+
 def test_extent_ellipse_axes_and_orientation():
     theta = 0.4
     V = np.array([[np.cos(theta), -np.sin(theta)], [np.sin(theta), np.cos(theta)]])
@@ -93,12 +119,15 @@ def test_extent_ellipse_axes_and_orientation():
 
 
 @pytest.mark.parametrize("seed", [0, 1, 2])
-def test_harbour_backwash_is_one_extended_track_and_false_tracks_fall(seed):
+def test_harbour_boat_and_backwash_are_one_extended_track_each_and_false_tracks_fall(seed):
     run = harbour_scenario(seed)
-    hybrid = run_figures(run, TrackingPipeline.all_kinds())
+    hybrid = run_figures(run, TrackingPipeline.all_kinds(), designate=True)
     alone = run_figures(run, TrackingPipeline())
     assert hybrid["backwash"] == 1
     assert hybrid["false"] <= 0.2 * alone["false"]  # at least 80 % fewer false confirmed tracks
+    # the boat, designated at its first detection as in paper 002: one extended track
+    # from then to the end, never more than 100 m from it
+    assert hybrid["boat_breaks"] == 0 and hybrid["boat_held"] == 1.0
 
 
 def test_convoy_is_one_track_through_both_junctions_and_splits_into_two():
@@ -106,8 +135,9 @@ def test_convoy_is_one_track_through_both_junctions_and_splits_into_two():
     extended track holds the convoy from its confirmation to the split, through both
     junctions; both groups have an extended track within 150 m a few scans after the split;
     its detections start next to no false individual track. (Not yet the issue's targets:
-    centroid RMSE 36 m here against 15 m, the split seen 3.4 scans after it against 3, and
-    the overtaking vehicle's track breaks.)"""
+    centroid RMSE 36 m here against 15 m, where a filter on the convoy's own detections alone
+    reaches 28 m (benchmarks.extended.centroid_floor); the split seen 3.4 scans after it
+    against 3; and the overtaking vehicle's track breaks.)"""
     figures = run_figures(convoy_scenario(0), TrackingPipeline.all_kinds())
     assert figures["held"] == 1
     assert figures["rmse"] < 50.0
