@@ -1,7 +1,7 @@
 """Extended objects and groups (paper 002): the hybrid tracker against the individual-only
 tracker on the same detections.
 
-    python -m benchmarks.extended [--seeds 3]
+    python -m benchmarks.extended [--seeds 3] [--plots DIR]
 
 Runs the convoy and harbour scenarios of :mod:`clients.scenarios.extended` through the
 pipeline with every track kind (``TrackingPipeline.all_kinds``, the service's) and through the
@@ -23,6 +23,9 @@ individual tracker alone, and prints side by side, per scenario, per seed and av
   (:func:`clients.scenarios.extended.designate_boat`), as paper 002 does;
 - the reference scenario's time per scan with extended tracking off and on (run alternately);
 - median milliseconds per scan, and one extended-track update with 20 detections.
+
+``--plots DIR`` (matplotlib, the ``bench`` extra) writes ``convoy.png`` and ``harbour.png``:
+each scenario at a few instants, the hybrid tracker above the individual-only one.
 """
 
 from __future__ import annotations
@@ -33,12 +36,14 @@ import statistics
 import sys
 import time
 import timeit
+from pathlib import Path
 
 import numpy as np
 
 from clients.scenarios.extended import (
     ExtendedScenarioRun,
     convoy_scenario,
+    designate_boat,
     harbour_scenario,
     run_figures,
 )
@@ -123,6 +128,110 @@ def centroid_floor(run: ExtendedScenarioRun, first_time: float = 45.0) -> float:
     return best
 
 
+#: The instants (s) the plots show, per scenario: convoy before J1, overtaken between the
+#: junctions, past J2, split; harbour boat coming in, at the bend, in the harbour.
+PLOT_TIMES = {"convoy": (60.0, 280.0, 420.0, 560.0), "harbour": (60.0, 160.0, 260.0)}
+
+
+def _history(run: ExtendedScenarioRun, pipeline: TrackingPipeline, designate: bool) -> list:
+    """The confirmed tracks after every scan of ``run`` (the boat designated if asked)."""
+    out = []
+    designated = not designate
+    for k, ts in enumerate(run.scans):
+        confirmed = pipeline.process(ts.scan.to_scan()).confirmed()
+        if not designated:
+            designated = designate_boat(run, pipeline, k)
+        out.append(confirmed)
+    return out
+
+
+def write_plots(directory: Path, seed: int = 0) -> list[Path]:
+    """``convoy.png`` and ``harbour.png``: each scenario at a few instants
+    (:data:`PLOT_TIMES`), the hybrid tracker above the individual-only one, as paper 002's
+    figures: the scan's detections, the true targets, the confirmed individual tracks with
+    their last 10 scans, and the extended tracks with their extent ellipses."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.patches import Ellipse
+
+    directory.mkdir(parents=True, exist_ok=True)
+    paths = []
+    for name, make in (("convoy", convoy_scenario), ("harbour", harbour_scenario)):
+        run = make(seed)
+        rows = {
+            "hybrid": _history(run, TrackingPipeline.all_kinds(), name == "harbour"),
+            "individual only": _history(run, TrackingPipeline(), False),
+        }
+        times = [float(ts.scan.time) for ts in run.scans]
+        instants = [
+            min(range(len(times)), key=lambda k: abs(times[k] - t)) for t in PLOT_TIMES[name]
+        ]
+        fig, axes = plt.subplots(2, len(instants), figsize=(4.5 * len(instants), 9), squeeze=False)
+        for row, (label, history) in enumerate(rows.items()):
+            for col, k in enumerate(instants):
+                ax = axes[row, col]
+                sim = run.scans[k].scan
+                cls = [run.target_class[int(i)] for i in sim.truth_ids]
+                grouped = np.array([c == "convoy" for c in cls])
+                X = sim.truth_states[:, :2]
+                if name == "convoy":
+                    centre = X[grouped].mean(axis=0)
+                    half = 800.0
+                else:
+                    centre, half = np.array([-100.0, -200.0]), 1100.0
+                ax.plot(*X[~grouped].T, "k+", ms=7, label="true targets")
+                if grouped.any():
+                    ax.plot(*X[grouped].T, "kx", ms=6, label="convoy members")
+                ax.plot(*sim.z.T, ".", color="tab:orange", ms=4, label="detections")
+                for track in history[k]:
+                    trail = [
+                        t.position
+                        for h in history[max(0, k - 10) : k + 1]
+                        for t in h
+                        if t.id == track.id
+                    ]
+                    if track.kind == "extended" and track.extent is not None:
+                        a, b = track.extent.semi_axes
+                        ax.add_patch(
+                            Ellipse(
+                                track.position,
+                                2 * a,
+                                2 * b,
+                                angle=math.degrees(track.extent.orientation),
+                                fill=False,
+                                color="tab:red",
+                                lw=1.5,
+                            )
+                        )
+                        colour = "tab:red"
+                    else:
+                        colour = "tab:blue"
+                    ax.plot(*np.array(trail).T, "-", color=colour, lw=1)
+                    ax.plot(*track.position, "o", color=colour, ms=4)
+                    inside = np.all(np.abs(np.array(track.position) - centre) < half)
+                    if inside:
+                        ax.annotate(track.id, track.position, fontsize=7, color=colour)
+                ax.set_xlim(centre[0] - half, centre[0] + half)
+                ax.set_ylim(centre[1] - half, centre[1] + half)
+                ax.set_aspect("equal")
+                ax.set_title(f"{label}, t = {times[k]:.0f} s", fontsize=10)
+                ax.tick_params(labelsize=7)
+                if row == 0 and col == 0:
+                    ax.legend(fontsize=7, loc="lower left")
+        fig.suptitle(
+            f"{name} (seed {seed}): individual tracks blue, extended tracks red with their"
+            " extent ellipses"
+        )
+        fig.tight_layout()
+        path = directory / f"{name}.png"
+        fig.savefig(path, dpi=90)
+        plt.close(fig)
+        paths.append(path)
+    return paths
+
+
 def _describe(label: str, r: dict[str, float], convoy: bool) -> str:
     text = (
         f"{label:<18} false individual tracks/scan {r['false']:.3f}, median {r['ms']:.1f} ms/scan"
@@ -146,6 +255,7 @@ def _describe(label: str, r: dict[str, float], convoy: bool) -> str:
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m benchmarks.extended", description=__doc__)
     parser.add_argument("--seeds", type=int, default=3)
+    parser.add_argument("--plots", type=Path, default=None, help="write PNG figures here")
     args = parser.parse_args(argv)
     print(f"== one extended-track update with 20 detections: {update_cost():.0f} µs")
     for name, make, convoy in (
@@ -178,6 +288,8 @@ def main(argv: list[str] | None = None) -> int:
         f"== reference scenario (no extended objects), extended tracking off / on: {off:.2f} / "
         f"{on:.2f} ms per scan ({100 * (on / off - 1):+.1f} %, target ≤ +10 %)"
     )
+    if args.plots is not None:
+        print("plots: " + ", ".join(str(p) for p in write_plots(args.plots)))
     return 0
 
 

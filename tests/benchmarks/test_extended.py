@@ -3,10 +3,11 @@
 from __future__ import annotations
 
 from dataclasses import replace
+from pathlib import Path
 
 import numpy as np
 
-from benchmarks.extended import centroid_floor
+from benchmarks.extended import centroid_floor, write_plots
 from clients.scenarios.extended import ExtendedScenarioRun, convoy_scenario
 
 
@@ -28,3 +29,11 @@ def test_centroid_floor_is_the_filter_lag_alone_when_every_member_is_seen_exactl
     # as simulated (Pd 0.7 per member, merged returns), the mean of what a scan shows
     # wanders by tens of metres: no tracker of the detections gets near 15 m
     assert 20.0 < centroid_floor(run) < 40.0
+
+
+def test_plots_show_both_scenarios_for_both_trackers(tmp_path: Path) -> None:
+    paths = write_plots(tmp_path)
+    assert [p.name for p in paths] == ["convoy.png", "harbour.png"]
+    for path in paths:
+        assert path.stat().st_size > 20_000
+        assert path.read_bytes()[:4] == b"\x89PNG"
