@@ -50,6 +50,9 @@ from clients.scenarios.extended import (
 from clients.scenarios.multitarget import reference_scenario, simulate
 from trackers.config import TrackerConfig
 from trackers.extended.random_matrix import ExtendedEstimate, update
+from trackers.filters.kalman import kalman_update
+from trackers.models.measurement import H_POSITION
+from trackers.models.motion import ConstantVelocity
 from trackers.pipeline import TrackingPipeline
 
 
@@ -100,27 +103,21 @@ def centroid_floor(run: ExtendedScenarioRun, first_time: float = 45.0) -> float:
         truth.append(ts.groups.get(0))
     best = math.inf
     for q in (0.1, 0.2, 0.5, 1.0):
+        model = ConstantVelocity(q)
         for r in (100.0, 200.0):
             errors = []
-            x = P = None
+            x: np.ndarray | None = None
+            P = np.zeros((5, 5))
             last = 0.0
             for (t, z, n), c in zip(zs, truth, strict=True):
-                if x is not None:  # predict: nearly constant velocity over dt
-                    dt = t - last
-                    F = np.eye(4)
-                    F[0, 2] = F[1, 3] = dt
-                    q1 = q * np.array([[dt**3 / 3, dt**2 / 2], [dt**2 / 2, dt]])
-                    Q = np.zeros((4, 4))
-                    Q[np.ix_([0, 2], [0, 2])] = Q[np.ix_([1, 3], [1, 3])] = q1
-                    x, P = F @ x, F @ P @ F.T + Q
+                if x is not None:
+                    x, P = model.predict(x, P, t - last)
                 if z is not None:
                     if x is None:
-                        x, P = np.array([z[0], z[1], 0.0, 0.0]), np.diag([r**2, r**2, 225.0, 225.0])
+                        x = np.array([z[0], z[1], 0.0, 0.0, 0.0])
+                        P = np.diag([r**2, r**2, 225.0, 225.0, 0.0])
                     else:
-                        H = np.eye(2, 4)
-                        S = H @ P @ H.T + np.eye(2) * r**2 / n
-                        K = P @ H.T @ np.linalg.inv(S)
-                        x, P = x + K @ (z - H @ x), (np.eye(4) - K @ H) @ P
+                        x, P, _ = kalman_update(x, P, z, np.eye(2) * r**2 / n, H_POSITION)
                 last = t
                 if x is not None and c is not None and t >= first_time:
                     errors.append(float(np.hypot(*(x[:2] - c))))
@@ -267,8 +264,9 @@ def main(argv: list[str] | None = None) -> int:
         floors = []
         for seed in range(args.seeds):
             run = make(seed)
-            hybrid = TrackingPipeline.all_kinds()
-            rows["hybrid"].append(run_figures(run, hybrid, designate=not convoy))
+            rows["hybrid"].append(
+                run_figures(run, TrackingPipeline.all_kinds(), designate=not convoy)
+            )
             rows["individual only"].append(run_figures(run, TrackingPipeline()))
             for label in rows:
                 print("   " + _describe(f"{label} {seed}", rows[label][-1], convoy))

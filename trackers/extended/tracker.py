@@ -864,30 +864,26 @@ def _likeliest(
         root = max(1, len(s)) ** 0.5
         a, b, c = (g / root for g in G1)
         fit.append((c * x * x - 2.0 * b * x * y + a * y * y) / (a * c - b * b))
-    order = sorted(range(len(subsets)), key=fit.__getitem__)
-    candidates = [[r for r in subsets[k]] for k in order]
+    families = [[subsets[k] for k in sorted(range(len(subsets)), key=fit.__getitem__)]]
     if inside is not None and len(inside) < len(rows):  # some lie outside the gate
-        candidates.extend([[r] for r in sorted(inside, key=inside.__getitem__)])
-        fine_from = len(order)
-    else:
-        fine_from = len(candidates)
-    best, chosen, R_best, mom_best = -1, [], None, None
-    union: list[int] = []
-    for k, add in enumerate(candidates):
-        if k == fine_from:
-            union = []
-        union.extend(add)
-        W = sorted(union)
-        Rm = _mean_R(points, W)
-        mom = moments(np.take(scan.z, W, axis=0))
-        g = (
-            _log_poisson(len(W), track.gamma)
-            + moments_log_likelihood(est, mom, Rm, cfg.z_scale, extent_uncertain=True)
-            - len(W) * log_lam
-        )
-        if g > gain:
-            gain, best, chosen, R_best, mom_best = g, k, W, Rm, mom
-    if best < 0:
+        families.append([[r] for r in sorted(inside, key=inside.__getitem__)])
+    chosen: list[int] = []
+    R_best = mom_best = None
+    for family in families:
+        union: list[int] = []
+        for add in family:
+            union.extend(add)
+            W = sorted(union)
+            Rm = _mean_R(points, W)
+            mom = moments(np.take(scan.z, W, axis=0))
+            g = (
+                _log_poisson(len(W), track.gamma)
+                + moments_log_likelihood(est, mom, Rm, cfg.z_scale, extent_uncertain=True)
+                - len(W) * log_lam
+            )
+            if g > gain:
+                gain, chosen, R_best, mom_best = g, W, Rm, mom
+    if not chosen:
         return gain, [], [], [], None
     taken = set(chosen)
     parts = [p for p in ([r for r in s if r in taken] for s in subsets) if p]
