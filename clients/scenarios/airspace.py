@@ -46,6 +46,7 @@ __all__ = [
     "formation_scenario",
     "manoeuvre_scenario",
     "mixed_speed_scenario",
+    "path_ranges",
     "radar_hits",
     "radar_scan",
     "simulate_scripted",
@@ -254,23 +255,51 @@ def _heading_state(
 SPEED_CLASSES = ("parked", "ground", "helicopter", "airliner", "jet")
 
 
+def path_ranges(
+    target: ScriptedTarget, duration: float, origin: tuple[float, float] = (0.0, 0.0)
+) -> np.ndarray:
+    """Distances (m) from ``origin`` of the target's noise-free path (its script without
+    process noise) at every second from 0 to ``duration``."""
+    bare = ScriptedTarget(target.target_class, target.state, target.manoeuvres, q=0.0)
+    rng = np.random.default_rng(0)  # unused: no process noise
+    state = np.asarray(target.state, dtype=float)
+    points = [state[:2]]
+    for t in range(1, math.floor(duration) + 1):
+        state = _propagate(bare, state, t - 1.0, float(t), rng)
+        points.append(state[:2])
+    return np.hypot(*(np.asarray(points) - np.asarray(origin)).T)
+
+
+def _drawn_within(draw, duration: float, lo: float, hi: float, attempts: int = 1000):
+    """The first target ``draw()`` gives whose noise-free path stays between ``lo`` and ``hi``
+    metres from the radar for the whole scenario."""
+    for _ in range(attempts):
+        target = draw()
+        r = path_ranges(target, duration)
+        if r.min() >= lo and r.max() <= hi:
+            return target
+    raise RuntimeError(f"no path within {lo:.0f}-{hi:.0f} m in {attempts} draws")
+
+
 def mixed_speed_scenario(period: float = 4.0, duration: float = 160.0, seed: int = 0):
     """Scenario 1 of the issue on targets of every speed: one radar at the origin (range noise
     50 m, bearing 1 mrad, Pd 0.9, about 100 false alarms a scan over 150 km × 150 km) scanning
     every ``period`` seconds, watching 4 parked vehicles, 8 ground vehicles (3-35 m/s),
     4 helicopters (30-90 m/s), 8 airliners (180-280 m/s; four turn at 2-4°/s for 20-40 s) and
-    two jets at 500 and 680 m/s, the faster pulling 5 g for 15 s. Targets are 5-60 km from
-    the radar while the scenario runs."""
+    two jets at 500 and 680 m/s, the faster pulling 5 g for 15 s. Every target's path (its
+    script without process noise) stays 5-60 km from the radar for the whole scenario: a
+    moving target's draw is repeated until it does."""
     rng = np.random.default_rng(1000 + seed)
     t_mid = duration / 2.0
+    lo, hi = 5e3, 60e3
     targets: list[ScriptedTarget] = []
 
-    def place(lo: float, hi: float) -> tuple[float, float]:
-        r, a = rng.uniform(lo, hi), rng.uniform(-math.pi, math.pi)
+    def place(r_lo: float, r_hi: float) -> tuple[float, float]:
+        r, a = rng.uniform(r_lo, r_hi), rng.uniform(-math.pi, math.pi)
         return r * math.cos(a), r * math.sin(a)
 
     for _ in range(4):
-        x, y = place(5e3, 50e3)
+        x, y = place(lo, 50e3)
         targets.append(ScriptedTarget("parked", (x, y, 0.0, 0.0)))
     # (class, count, range band m, speed band m/s, process noise q)
     for name, count, ranges, speeds, q in (
@@ -278,32 +307,46 @@ def mixed_speed_scenario(period: float = 4.0, duration: float = 160.0, seed: int
         ("helicopter", 4, (10e3, 45e3), (30, 90), 0.1),
     ):
         for _ in range(count):
-            mid, speed = place(*ranges), rng.uniform(*speeds)
-            heading = rng.uniform(-math.pi, math.pi)
-            targets.append(ScriptedTarget(name, _heading_state(mid, speed, heading, t_mid), q=q))
+
+            def ground_or_helicopter(name=name, ranges=ranges, speeds=speeds, q=q):
+                mid, speed = place(*ranges), rng.uniform(*speeds)
+                heading = rng.uniform(-math.pi, math.pi)
+                return ScriptedTarget(name, _heading_state(mid, speed, heading, t_mid), q=q)
+
+            targets.append(_drawn_within(ground_or_helicopter, duration, lo, hi))
     for i in range(8):
-        speed = rng.uniform(180, 280)
-        manoeuvres = ()
-        if i % 2 == 0:
-            rate = math.radians(rng.uniform(2, 4)) * rng.choice([-1.0, 1.0])
-            manoeuvres = (
-                Manoeuvre(rng.uniform(0.2, 0.6) * duration, rng.uniform(20, 40), float(rate)),
-            )
-        # Airliners cross the area on chords 12-30 km from the radar.
-        heading = rng.uniform(-math.pi, math.pi)
-        offset = rng.uniform(12e3, 30e3)
-        mid = (-offset * math.sin(heading), offset * math.cos(heading))
-        targets.append(
-            ScriptedTarget("airliner", _heading_state(mid, speed, heading, t_mid), manoeuvres, 0.05)
-        )
-    for speed, offset, heading, turn in ((500.0, 25e3, 0.3, None), (680.0, 35e3, 2.0, 5.0)):
-        mid = (-offset * math.sin(heading), offset * math.cos(heading))
-        manoeuvres = ()
-        if turn is not None:
-            manoeuvres = (Manoeuvre(0.45 * duration, 15.0, turn * G / speed),)
-        targets.append(
-            ScriptedTarget("jet", _heading_state(mid, speed, heading, t_mid), manoeuvres, 0.1)
-        )
+
+        def airliner(turns=i % 2 == 0):
+            speed = rng.uniform(180, 280)
+            manoeuvres = ()
+            if turns:
+                rate = math.radians(rng.uniform(2, 4)) * rng.choice([-1.0, 1.0])
+                manoeuvres = (
+                    Manoeuvre(rng.uniform(0.2, 0.6) * duration, rng.uniform(20, 40), float(rate)),
+                )
+            # Airliners cross the area on chords 12-30 km from the radar.
+            heading = rng.uniform(-math.pi, math.pi)
+            offset = rng.uniform(12e3, 30e3)
+            mid = (-offset * math.sin(heading), offset * math.cos(heading))
+            state = _heading_state(mid, speed, heading, t_mid)
+            return ScriptedTarget("airliner", state, manoeuvres, 0.05)
+
+        targets.append(_drawn_within(airliner, duration, lo, hi))
+    for speed, turn in ((500.0, None), (680.0, 5.0)):
+
+        def jet(speed=speed, turn=turn):
+            # Jets cross on chords 5-25 km from the radar; the faster turns near the middle.
+            heading = rng.uniform(-math.pi, math.pi)
+            offset = rng.uniform(5e3, 25e3)
+            mid = (-offset * math.sin(heading), offset * math.cos(heading))
+            manoeuvres = ()
+            if turn is not None:
+                rate = turn * G / speed * rng.choice([-1.0, 1.0])
+                manoeuvres = (Manoeuvre(0.45 * duration, 15.0, float(rate)),)
+            state = _heading_state(mid, speed, heading, t_mid)
+            return ScriptedTarget("jet", state, manoeuvres, 0.1)
+
+        targets.append(_drawn_within(jet, duration, lo, hi))
     radar = PolarRadar("radar-1", period=period)
     return ScriptedScenario(tuple(targets), (radar,), duration, seed=seed)
 

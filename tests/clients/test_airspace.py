@@ -10,6 +10,7 @@ from clients.scenarios.airspace import (
     ScriptedTarget,
     formation_scenario,
     mixed_speed_scenario,
+    path_ranges,
     simulate_scripted,
 )
 
@@ -47,9 +48,25 @@ def test_mixed_speed_scenario_has_every_class_and_speed():
     assert set(classes) == {"parked", "ground", "helicopter", "airliner", "jet"}
     assert np.all(speeds[classes == "parked"] == 0)
     assert speeds.max() == pytest.approx(680.0)
-    ranges = np.hypot(*scans[0].truth_states[:, :2].T)
-    assert ranges.min() > 4e3 and ranges.max() < 80e3
+    ranges = np.hypot(*np.concatenate([s.truth_states[:, :2] for s in scans]).T)
+    assert ranges.min() > 4e3 and ranges.max() < 62e3  # 5-60 km, give or take process noise
     assert 60 < np.mean([np.sum(s.target_of_detection < 0) for s in scans]) < 140
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_mixed_speed_paths_stay_5_to_60_km_from_the_radar(seed):
+    sc = mixed_speed_scenario(period=4.0, seed=seed)
+    for target in sc.targets:
+        r = path_ranges(target, sc.duration)
+        assert r.min() >= 5e3 and r.max() <= 60e3, target
+
+
+def test_path_ranges_follow_the_script():
+    target = ScriptedTarget("jet", (10e3, 0.0, 0.0, 500.0), (Manoeuvre(10.0, 10.0, 0.05),))
+    r = path_ranges(target, 30.0)
+    assert r.shape == (31,)
+    assert r[0] == pytest.approx(10e3)
+    assert r[10] == pytest.approx(math.hypot(10e3, 5e3))  # straight for 10 s at 500 m/s
 
 
 def test_formation_scenario_three_radars_unsynchronized():
