@@ -393,8 +393,10 @@ class FormationConfig:
     object, the extended tracker's), seen so for ``confirm_scans`` scans spanning at least
     ``confirm_time``, become a formation. Its members are then updated with the detections
     that the template of the formation (the members' predicted positions on a grid, eq. 7)
-    matches; their motion is the IMM of ``motion`` with the constant-velocity noise ``q_cv``
-    (formations fly steadily; the coordinated-turn mode follows their turns).
+    matches; their motion is the IMM of ``motion`` with the formation's own constant-velocity
+    mode: noise ``q_cv``, mean time in it ``cv_sojourn_time`` and turn-rate reset
+    ``cv_turn_rate_std`` (formations fly steadily, so a member's estimate should not carry the
+    turn mode's noise between turns; the coordinated-turn mode still follows their turns).
 
     Off by default: on the paper's environments it holds the targets as well as the
     individual tracker alone, not better yet (``python -m benchmarks.formation``). A member that
@@ -424,6 +426,19 @@ class FormationConfig:
     confirm_time: float = _field(3.0, "and the time those scans must span, s", ge=0, le=1e6)
     q_cv: float = _field(
         0.05, "acceleration noise PSD of the members' constant-velocity mode, m²/s³", gt=0, le=1e4
+    )
+    cv_sojourn_time: float = _field(
+        3000.0,
+        "mean time a member spends in the constant-velocity mode, s (formations fly steadily;"
+        " the other modes keep motion.sojourn_times)",
+        gt=0,
+        le=1e6,
+    )
+    cv_turn_rate_std: float = _field(
+        0.02,
+        "the members' constant-velocity mode resets the turn rate with this std, rad/s",
+        gt=0,
+        le=10.0,
     )
     gate_probability: float = _field(
         0.9999, "probability that a member's detection falls in its gate", gt=0, lt=1

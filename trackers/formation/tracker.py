@@ -7,7 +7,8 @@ other than their gates never swap and clutter near them is not taken for them. E
 sensor's batch; several sensors' batches come one after another, each with its own noise):
 
 1. **Prediction.** Every member's IMM (the modes of ``motion``, the constant-velocity mode
-   with the formation's own ``q_cv``) is predicted to the scan's time.
+   with the formation's own noise, sojourn time and turn-rate reset) is predicted to the
+   scan's time.
 2. **Pre-association** (section III.A). The detections near a formation are split into groups
    by a distance threshold (the formation's largest member spacing); a group whose centre
    ``z̄`` passes the centre gate ``(z̄ − c̄)ᵀ S̄⁻¹ (z̄ − c̄) ≤ γ`` (eq. 4; ``c̄`` the members' mean
@@ -44,7 +45,7 @@ import numpy as np
 
 from trackers.association.gating import inverse_2x2, max_eigenvalue_2x2
 from trackers.association.spatial import pairs_within
-from trackers.config import FormationConfig, TrackerConfig
+from trackers.config import FormationConfig, MotionConfig, TrackerConfig
 from trackers.extended.partition import component_labels
 from trackers.filters.imm import imm_combine, imm_predict, imm_update, transition_matrix
 from trackers.formation.template import cell_sizes, match_template
@@ -142,9 +143,20 @@ class _State:
     time: float | None = None
 
 
+def member_motion(config: TrackerConfig) -> MotionConfig:
+    """The members' IMM: the modes of ``motion``, the constant-velocity mode with the
+    formation's ``q_cv``, ``cv_sojourn_time`` and ``cv_turn_rate_std``."""
+    f, motion = config.formation, config.motion
+    sojourn = tuple(
+        f.cv_sojourn_time if name == "cv" else tau
+        for name, tau in zip(motion.models, motion.sojourn_times, strict=True)
+    )
+    return replace(motion, q_cv=f.q_cv, sojourn_times=sojourn, cv_turn_rate_std=f.cv_turn_rate_std)
+
+
 def _models(config: TrackerConfig) -> tuple[ConstantVelocity | CoordinatedTurn, ...]:
-    """The members' modes: those of ``motion``, constant velocity with ``formation.q_cv``."""
-    return build_models(config.motion, q_cv=config.formation.q_cv)
+    """The members' modes (:func:`member_motion`)."""
+    return build_models(member_motion(config))
 
 
 def _new_formation(
@@ -343,7 +355,7 @@ def _predicted(
         x = np.concatenate([formations[i].x for i in group])
         P = np.concatenate([formations[i].P for i in group])
         mu = np.concatenate([formations[i].mu for i in group])
-        Pi = transition_matrix(config.motion.sojourn_times, dt)
+        Pi = transition_matrix(member_motion(config).sojourn_times, dt)
         xp, Pp, cbar = imm_predict(models, x, P, mu, Pi, dt)
         start = 0
         for i in group:
