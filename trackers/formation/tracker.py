@@ -143,15 +143,25 @@ class _State:
     time: float | None = None
 
 
+def _member_sojourn_times(config: TrackerConfig) -> tuple[float, ...]:
+    """``motion.sojourn_times`` with the constant-velocity mode's ``formation.cv_sojourn_time``."""
+    motion = config.motion
+    return tuple(
+        config.formation.cv_sojourn_time if name == "cv" else tau
+        for name, tau in zip(motion.models, motion.sojourn_times, strict=True)
+    )
+
+
 def member_motion(config: TrackerConfig) -> MotionConfig:
     """The members' IMM: the modes of ``motion``, the constant-velocity mode with the
     formation's ``q_cv``, ``cv_sojourn_time`` and ``cv_turn_rate_std``."""
-    f, motion = config.formation, config.motion
-    sojourn = tuple(
-        f.cv_sojourn_time if name == "cv" else tau
-        for name, tau in zip(motion.models, motion.sojourn_times, strict=True)
+    f = config.formation
+    return replace(
+        config.motion,
+        q_cv=f.q_cv,
+        sojourn_times=_member_sojourn_times(config),
+        cv_turn_rate_std=f.cv_turn_rate_std,
     )
-    return replace(motion, q_cv=f.q_cv, sojourn_times=sojourn, cv_turn_rate_std=f.cv_turn_rate_std)
 
 
 def _models(config: TrackerConfig) -> tuple[ConstantVelocity | CoordinatedTurn, ...]:
@@ -355,7 +365,7 @@ def _predicted(
         x = np.concatenate([formations[i].x for i in group])
         P = np.concatenate([formations[i].P for i in group])
         mu = np.concatenate([formations[i].mu for i in group])
-        Pi = transition_matrix(member_motion(config).sojourn_times, dt)
+        Pi = transition_matrix(_member_sojourn_times(config), dt)
         xp, Pp, cbar = imm_predict(models, x, P, mu, Pi, dt)
         start = 0
         for i in group:
