@@ -34,6 +34,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from trackers.types import Scan
+
 __all__ = [
     "CLUTTER_DENSITY",
     "EXTENT",
@@ -148,6 +150,21 @@ class BendingRun:
     pd: float
     clutter_density: float
     dt: float
+
+    def to_scan(self, index: int, sensor_id: str = "radar") -> Scan:
+        """Scan number ``index`` (0-based) as a :class:`trackers.types.Scan`: every detection
+        with the noise ``R``, ids ``k{k}d{i}``, the run's ``pd`` and clutter density."""
+        sc = self.scans[index]
+        n = len(sc.detections)
+        return Scan(
+            sensor_id,
+            sc.time,
+            sc.detections.copy(),
+            np.tile(self.R, (n, 1, 1)),
+            detection_ids=tuple(f"k{sc.k}d{i}" for i in range(n)),
+            pd=self.pd,
+            clutter_density=self.clutter_density,
+        )
 
 
 def bending_scenario(

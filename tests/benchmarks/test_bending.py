@@ -17,11 +17,23 @@ def test_quick_run_prints_tables_targets_and_plots(tmp_path: Path, capsys) -> No
     assert code == 0
     assert "RMSE over time" in out and "Mode probabilities over time" in out
     assert "3x3x3" in out and "Targets:" in out
+    assert "Through the service's pipeline (3 run(s))" in out
     assert out.count("[met]") + out.count("[NOT met]") >= 10
     for name in ("bending_rmse.png", "bending_modes.png"):
         path = tmp_path / name
         assert path.stat().st_size > 10_000
         assert path.read_bytes()[:4] == b"\x89PNG"
+
+
+@pytest.mark.timeout(120)
+def test_the_pipeline_figures_hold_the_papers_target_from_its_own_birth() -> None:
+    """Seeds 0-2 through the service's pipeline with the two patterns configured: one
+    track from k = 3 to the end in each, attitude within 2 degrees RMS, the true shape almost
+    always above 0.9, no individual track confirmed on its points or the clutter."""
+    f = bending.pipeline_figures(3, "lmm")
+    assert (f.runs, f.held, f.individual_confirmed) == (3, 3, 0)
+    assert f.position_rmse < 0.5 and f.attitude_rmse < 2.0 and f.shape_right > 0.95
+    assert f.median_ms > 0
 
 
 def _errors(seed: int, algorithm: str, point_margin: float | None):

@@ -79,3 +79,14 @@ def test_patterns_are_in_the_square_and_spaced():
         assert d[np.triu_indices(len(p), 1)].min() >= MIN_POINT_SPACING
     np.testing.assert_array_equal(paper_patterns(0)[0], p1)
     assert not np.array_equal(paper_patterns(1)[0], p1)
+
+
+def test_a_scan_of_the_run_for_the_tracker():
+    run = bending_scenario(seed=2)
+    sc = run.scans[4]
+    scan = run.to_scan(4)
+    assert (scan.sensor_id, scan.time, scan.size) == ("radar", sc.time, len(sc.detections))
+    np.testing.assert_array_equal(scan.z, sc.detections)
+    np.testing.assert_array_equal(scan.R, np.broadcast_to(run.R, (scan.size, 2, 2)))
+    assert scan.detection_ids[0] == "k5d0" and scan.pd == run.pd
+    assert scan.clutter_density == run.clutter_density

@@ -22,17 +22,7 @@ def _config(run: BendingRun, **section: object) -> TrackerConfig:
 
 
 def _scan(run: BendingRun, k: int) -> Scan:
-    sc = run.scans[k]
-    n = len(sc.detections)
-    return Scan(
-        "radar",
-        sc.time,
-        sc.detections,
-        np.tile(run.R, (n, 1, 1)),
-        detection_ids=tuple(f"k{sc.k}d{i}" for i in range(n)),
-        pd=run.pd,
-        clutter_density=run.clutter_density,
-    )
+    return run.to_scan(k)
 
 
 def _peer(p: TrackingPipeline) -> PatternTracker:
