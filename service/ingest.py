@@ -291,9 +291,15 @@ class RecentBatches:
             recent.pop(digest, None)
 
 
+#: Seconds between two log lines about refused batches of one reason (the rest are counted).
+REFUSAL_LOG_INTERVAL = 10.0
+
+
 class Refusals:
     """Refuses batches: counts each in the stats, publishes its Error report and resolves its
-    future. Drops (``overloaded``) are logged at most once a second. Thread-safe."""
+    future. Drops (``overloaded``) are logged at most once a second; refusals at warning level,
+    at most one line per reason every :data:`REFUSAL_LOG_INTERVAL` seconds, with the number
+    refused since the previous line (a hostile sender cannot flood the log). Thread-safe."""
 
     def __init__(self, stats: Stats, out: ReportOut) -> None:
         self.stats = stats
@@ -301,6 +307,7 @@ class Refusals:
         self._log_lock = threading.Lock()
         self._unlogged = 0
         self._last_log = -math.inf
+        self._refusal_log: dict[str, tuple[float, int]] = {}  # reason → (last line, unlogged)
 
     def refuse(
         self,
@@ -314,7 +321,7 @@ class Refusals:
         report = self.report(payload, key_sensor_id, reason, detail, batch)
         self.stats.rejected_batch(reason)
         self.out.error(report)
-        log.debug("batch refused: %s", report)
+        self._log_refusal(report)
         return report
 
     def refuse_unread(
@@ -328,7 +335,7 @@ class Refusals:
         )
         self.stats.rejected_batch(reason)
         self.out.error(report)
-        log.debug("batch refused unread: %s", report)
+        self._log_refusal(report)
         return report
 
     def reject(self, item: Item, reason: str, detail: str, batch: DetectionBatchIn | None) -> None:
@@ -365,6 +372,25 @@ class Refusals:
         sensor, t = (batch.sensor_id, batch.time) if batch is not None else peek(payload)
         return error_report_for(
             len(payload), reason, detail, key_sensor_id=key_sensor_id, sensor_id=sensor, time=t
+        )
+
+    def _log_refusal(self, report: dict[str, Any]) -> None:
+        reason = str(report.get("error", "?"))
+        now = time.monotonic()
+        with self._log_lock:
+            last, unlogged = self._refusal_log.get(reason, (-math.inf, 0))
+            if now - last < REFUSAL_LOG_INTERVAL:
+                self._refusal_log[reason] = (last, unlogged + 1)
+                return
+            self._refusal_log[reason] = (now, 0)
+        more = f" ({unlogged} more {reason} since the last such line)" if unlogged else ""
+        log.warning(
+            "batch refused, %s, sensor %s, time %s: %s%s",
+            reason,
+            report.get("sensor_id"),
+            report.get("time"),
+            str(report.get("detail"))[:200],
+            more,
         )
 
     def _log_drop(self, detail: str) -> None:

@@ -180,6 +180,33 @@ def test_drops_are_logged_at_most_once_a_second(caplog: pytest.LogCaptureFixture
     assert all(i.future.result(0).error["sensor_id"] == "radar-1" for i in items)  # type: ignore[index]
 
 
+def test_refusals_are_logged_once_per_reason_and_interval(
+    caplog: pytest.LogCaptureFixture, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A newcomer sees refused batches in the log at warning level; a flood of them gives one
+    line per reason every REFUSAL_LOG_INTERVAL seconds, with the count since the last."""
+    import service.ingest as ingest
+
+    clock = [100.0]
+    monkeypatch.setattr(ingest.time, "monotonic", lambda: clock[0])
+    refusals = Refusals(Stats("x"), ReportOut(ListSink()))
+    nan = b'{"sensor_id": "s-1", "time": 3.0, "detections": [{"x": NaN, "y": 0}]}'
+    with caplog.at_level(logging.WARNING, logger="service.ingest"):
+        for _ in range(5):
+            refusals.refuse(nan, None, "invalid_batch", "detections[0].x: not a number")
+        refusals.refuse(b"{", "radar-2", "invalid_json", "EOF" + "x" * 1000)
+        clock[0] += ingest.REFUSAL_LOG_INTERVAL
+        refusals.refuse(nan, None, "invalid_batch", "detections[0].x: not a number")
+    lines = [r.getMessage() for r in caplog.records]
+    assert lines[0] == (
+        "batch refused, invalid_batch, sensor s-1, time 3.0: detections[0].x: not a number"
+    )
+    assert lines[1].startswith("batch refused, invalid_json, sensor radar-2, time None: EOFxx")
+    assert len(lines[1]) < 300  # the detail is cut short
+    assert lines[2].endswith("(4 more invalid_batch since the last such line)")
+    assert len(lines) == 3
+
+
 @pytest.mark.parametrize(
     ("payload", "expected"),
     [
