@@ -84,8 +84,10 @@ def latest_report(session: zenoh.Session, keys: Keys, timeout: float) -> dict[st
 
 #: ``continuous``: targets come and go forever (:mod:`clients.scenarios.continuous`);
 #: ``reference``: the 100 s reference scenario replayed in a loop; ``convoy`` and
-#: ``harbour``: the extended-object scenarios (:mod:`clients.scenarios.extended`) in a loop.
-SCENARIOS = ("continuous", "reference", "convoy", "harbour")
+#: ``harbour``: the extended-object scenarios (:mod:`clients.scenarios.extended`) in a loop;
+#: ``formation``: paper 003's two formations seen by three radars, with clutter around them
+#: (environment 2 at (λ1, λ2) = (2, 4), :mod:`clients.scenarios.formation`), in a loop.
+SCENARIOS = ("continuous", "reference", "convoy", "harbour", "formation")
 
 
 def looped_scans(scenario: str, seed: int = 0) -> list[SimulatedScan]:
@@ -101,6 +103,10 @@ def looped_scans(scenario: str, seed: int = 0) -> list[SimulatedScan]:
             else extended.harbour_scenario(seed)
         )
         return [truth.scan for truth in run.scans]
+    if scenario == "formation":
+        from clients.scenarios.formation import environment_2, simulate_formations
+
+        return simulate_formations(environment_2(2.0, 4.0, seed=seed))
     raise ValueError(f"scenario: one of {', '.join(SCENARIOS[1:])}, got {scenario!r}")
 
 

@@ -300,6 +300,9 @@ def create_app(settings: Settings | None = None, token_source: str | None = None
     tracker_config, ingest = loaded if loaded else (TrackerConfig(), ingest_defaults)
     if loaded:
         log.info("tracker configuration loaded from %s", settings.config_file)
+    if settings.demo and settings.demo_scenario == "formation":
+        tracker_config = tracker_config.merged({"formation": {"enabled": True}})
+        log.info("demo formation: formation tracking switched on (formation.enabled)")
     log.info(
         "state folder %s; configuration file %s",
         settings.state_dir,

@@ -60,7 +60,7 @@ DEFAULT_CONFIG_NAME = "config.json"
 
 #: The demo client's scenarios (``python -m clients.demo --scenario``): ``--demo`` alone runs
 #: the first, ``--demo convoy`` the one named.
-DEMO_SCENARIOS = ("continuous", "reference", "convoy", "harbour")
+DEMO_SCENARIOS = ("continuous", "reference", "convoy", "harbour", "formation")
 
 #: Where the service listens in a container (``container``) unless told otherwise: every
 #: interface, so the ports the container publishes reach it.
@@ -310,11 +310,13 @@ class Settings(BaseSettings):
             + ", ".join(DEMO_SCENARIOS)
         ),
     )
-    demo_scenario: Literal["continuous", "reference", "convoy", "harbour"] = Field(
+    demo_scenario: Literal["continuous", "reference", "convoy", "harbour", "formation"] = Field(
         default="continuous",
         description=(
             "the demo's scenario: continuous (targets come and go), reference (the 100 s "
-            "reference scenario in a loop), convoy or harbour (extended objects, in a loop)"
+            "reference scenario in a loop), convoy or harbour (extended objects, in a loop), "
+            "formation (paper 003's formations and three radars, in a loop; switches "
+            "formation tracking on)"
         ),
     )
     demo_speed: float = Field(

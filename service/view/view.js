@@ -210,8 +210,79 @@
     ctx.globalAlpha = 1;
   }
 
-  // by track kind; `formation` (members joined) comes later
-  const DRAW_KIND = { individual: drawIndividual, extended: drawExtended };
+  // the screen points of a formation's members that this frame holds, by id
+  function memberPoints(t) {
+    const byId = new Map(model.confirmed.concat(model.tentative).map((m) => [m.id, m]));
+    const out = [];
+    for (const id of t.members || []) {
+      const m = byId.get(id);
+      if (m) out.push(toScreen(m.position[0], m.position[1]));
+    }
+    return out;
+  }
+
+  // the convex hull of screen points (monotone chain), counter-clockwise on screen
+  function hull(points) {
+    const p = points.slice().sort((a, b) => a[0] - b[0] || a[1] - b[1]);
+    if (p.length < 3) return p;
+    const cross = (o, a, b) => (a[0] - o[0]) * (b[1] - o[1]) - (a[1] - o[1]) * (b[0] - o[0]);
+    const lower = [];
+    for (const q of p) {
+      while (lower.length >= 2 && cross(lower[lower.length - 2], lower[lower.length - 1], q) <= 0) lower.pop();
+      lower.push(q);
+    }
+    const upper = [];
+    for (const q of p.slice().reverse()) {
+      while (upper.length >= 2 && cross(upper[upper.length - 2], upper[upper.length - 1], q) <= 0) upper.pop();
+      upper.push(q);
+    }
+    return lower.slice(0, -1).concat(upper.slice(0, -1));
+  }
+
+  // a formation: its outline (the hull of its members, a few pixels out), each member joined
+  // to the formation's centre, the centre with its id and velocity vector (the members are
+  // drawn as the individual tracks they are)
+  function drawFormation(t, style) {
+    const [cx, cy] = toScreen(t.position[0], t.position[1]);
+    const members = memberPoints(t);
+    ctx.globalAlpha = style.alpha;
+    drawTrail(t, style.trail, EXTENDED_TRAIL_POINTS);
+    ctx.strokeStyle = style.selected ? "#ffffff" : style.color;
+    ctx.lineWidth = style.selected ? 2.5 : 1.5;
+    const outline = hull(members).map(([sx, sy]) => {
+      const d = Math.hypot(sx - cx, sy - cy) || 1;
+      return [sx + (8 * (sx - cx)) / d, sy + (8 * (sy - cy)) / d];
+    });
+    if (outline.length >= 3) {
+      ctx.beginPath();
+      outline.forEach(([sx, sy], i) => (i ? ctx.lineTo(sx, sy) : ctx.moveTo(sx, sy)));
+      ctx.closePath();
+      ctx.fillStyle = style.fill;
+      ctx.fill();
+      ctx.stroke();
+    }
+    ctx.lineWidth = 1;
+    ctx.setLineDash([4, 3]);
+    ctx.beginPath();
+    for (const [sx, sy] of members) {
+      ctx.moveTo(cx, cy);
+      ctx.lineTo(sx, sy);
+    }
+    ctx.stroke();
+    ctx.setLineDash([]);
+    ctx.lineWidth = 1.5;
+    drawVelocity(t, cx, cy, style.color);
+    ctx.fillStyle = style.color;
+    ctx.fillRect(cx - style.radius, cy - style.radius, 2 * style.radius, 2 * style.radius);
+    if (style.label) {
+      ctx.font = "12px system-ui, sans-serif";
+      ctx.fillText(`${t.id} (${members.length})`, cx + 7, cy + 14);
+    }
+    ctx.globalAlpha = 1;
+  }
+
+  // by track kind
+  const DRAW_KIND = { individual: drawIndividual, extended: drawExtended, formation: drawFormation };
 
   // colours by track kind (and status); a kind not here takes the individual's
   const PALETTE = {
@@ -223,6 +294,10 @@
       confirmed: { color: "#e07ce8", trail: "#8e4a94", fill: "rgba(224, 124, 232, 0.14)" },
       tentative: { color: "#b79ab9", trail: "#6b5a6d", fill: "rgba(183, 154, 185, 0.08)" },
     },
+    formation: {
+      confirmed: { color: "#7be38f", trail: "#3f8a4d", fill: "rgba(123, 227, 143, 0.10)" },
+      tentative: { color: "#a5c9ad", trail: "#5b7561", fill: "rgba(165, 201, 173, 0.06)" },
+    },
   };
 
   // where a click lands on a drawn track: its screen geometry, for picking and for tests
@@ -230,6 +305,10 @@
     if (t.kind === "extended") {
       const e = screenEllipse(t);
       if (e) return e;
+    }
+    if (t.kind === "formation") {
+      const [sx, sy] = toScreen(t.position[0], t.position[1]);
+      return { sx, sy, members: memberPoints(t).length };
     }
     const [sx, sy] = toScreen(t.position[0], t.position[1]);
     return { sx, sy };
@@ -382,6 +461,9 @@
         ["detections", String((t.detection_ids || []).length)],
       ];
     },
+    formation(t) {
+      return [["members", (t.members || []).join(", ")]];
+    },
   };
 
   function showDetails() {
@@ -413,6 +495,7 @@
         ["hits", String(t.hits)],
       );
       if (DETAIL_KIND[t.kind]) rows.push(...DETAIL_KIND[t.kind](t));
+      if (t.formation_id) rows.push(["formation", t.formation_id]);
       for (const [mode, p] of Object.entries(t.model_probabilities || {})) {
         rows.push([`p(${mode})`, fmt(p, 3)]);
       }

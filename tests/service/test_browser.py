@@ -218,3 +218,65 @@ def test_the_view_draws_an_extended_track_and_its_details(service: RunningServic
 def state_tracks(service: RunningService) -> list[dict[str, Any]]:
     """The service's latest confirmed tracks."""
     return httpx.get(service.url + "/api/v1/tracks").json()["tracks"]
+
+
+def test_the_view_draws_a_formation_with_its_members(service: RunningService) -> None:
+    """Paper 003's environment 1 with formations on: the view draws each formation track
+    (kind ``formation``) joined to the members it names, which are drawn as individual
+    tracks, and a click on the formation's centre shows its members."""
+    from selenium.webdriver.common.action_chains import ActionChains
+    from selenium.webdriver.common.by import By
+
+    from clients.scenarios.formation import environment_1, simulate_formations
+
+    from .helpers import batch_payload, run_batches
+
+    sims = simulate_formations(environment_1(seed=0, scans=25))
+    driver = _driver()
+    try:
+        with httpx.Client(base_url=service.url, timeout=10) as http:
+            r = http.patch(
+                "/api/v1/config", json={"formation": {"enabled": True}}, headers=service.auth
+            )
+            assert r.status_code == 200, r.text
+            driver.get(service.url + "/view")
+            results = run_batches(service.engine, [batch_payload(s) for s in sims], key=None)
+            assert all(r.accepted for r in results)
+            served = http.get("/api/v1/tracks", params={"kind": "formation"}).json()["tracks"]
+        assert served, "no formation track after environment 1's first 25 s"
+
+        def state() -> dict[str, Any]:
+            return driver.execute_script("return window.viewState || {}") or {}
+
+        wait_until(lambda: state().get("seq") == len(sims), timeout=30, what="the last frame")
+        view = state()
+        drawn = {t["id"]: t for t in view["tracks"]}
+        for f in served:
+            assert drawn[f["id"]]["kind"] == "formation"
+            assert drawn[f["id"]]["members"] == len(f["members"]) >= 3
+            assert all(drawn[m]["kind"] == "individual" for m in f["members"])
+        legend = driver.find_element(By.CSS_SELECTOR, '#legend .key[data-kind="formation"]')
+        assert legend.text == "formation"
+
+        f = served[0]
+        canvas = driver.find_element(By.ID, "plan")
+        w, h = canvas.size["width"], canvas.size["height"]
+        sx, sy = drawn[f["id"]]["sx"], drawn[f["id"]]["sy"]
+        ActionChains(driver).move_to_element_with_offset(
+            canvas, int(sx - w / 2), int(sy - h / 2)
+        ).click().perform()
+        details = driver.find_element(By.ID, "details")
+        wait_until(lambda: details.is_displayed(), timeout=10, what="the details panel")
+        fields = {
+            dd.get_attribute("data-field"): dd.text
+            for dd in details.find_elements(By.CSS_SELECTOR, "dd[data-field]")
+        }
+        if details.get_attribute("data-track-id") == f["id"]:
+            assert fields["kind"] == "formation"
+            assert fields["members"] == ", ".join(f["members"])
+        else:  # the click fell on a member's dot, nearer than the centre: it names its formation
+            assert fields["formation"] == f["id"]
+        ARTIFACTS.mkdir(exist_ok=True)
+        assert driver.save_screenshot(str(ARTIFACTS / "view-formation.png"))
+    finally:
+        driver.quit()

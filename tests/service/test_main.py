@@ -61,6 +61,7 @@ def test_no_endpoint_no_demo() -> None:
         (["--demo", "convoy"], "convoy"),
         (["--demo", "harbour", "--log-level", "warning"], "harbour"),
         (["--demo-scenario", "convoy", "--demo"], "convoy"),
+        (["--demo", "formation"], "formation"),
     ],
 )
 def test_demo_takes_a_scenario(argv: list[str], scenario: str) -> None:
@@ -87,3 +88,25 @@ def test_demo_scenarios_and_speed() -> None:
     assert command is not None and command[-4:] == ["--scenario", "convoy", "--speed", "5.0"]
     with pytest.raises(SystemExit):
         load_settings(["--demo", "airshow"])
+
+
+@pytest.mark.parametrize(("demo", "enabled"), [("formation", True), ("convoy", False)])
+def test_the_formation_demo_switches_formations_on(tmp_path, demo: str, enabled: bool) -> None:
+    """Formations are off by default; ``--demo formation`` shows them, so it turns them on."""
+    from service.main import create_app
+
+    settings = Settings(  # type: ignore[call-arg]
+        demo=demo, state_dir=tmp_path, config_file="none", zenoh_listen="none"
+    )
+    app = create_app(settings)
+    assert app.state.engine.tracker_config.formation.enabled is enabled
+
+
+def test_the_formation_demo_publishes_paper_003s_three_radars() -> None:
+    from clients.demo import looped_scans
+
+    scans = looped_scans("formation")
+    assert {s.sensor_id for s in scans[:3]} == {"radar-1", "radar-2", "radar-3"}
+    assert len(scans[0].truth_ids) == 8
+    times = [s.time for s in scans]
+    assert times == sorted(times)
