@@ -196,7 +196,7 @@ def simulate_formations(scenario: FormationScenario) -> list[SimulatedScan]:
         states = scenario.truth(t)
         hits = radar_hits(rng, radar, states)
         clutter = [np.zeros((0, 2))]
-        density = 1e-12
+        density = 0.0  # no clutter simulated: the scan states none, the tracker's own applies
         m = scenario.clutter_margin
         for f, group in zip(scenario.formations, groups, strict=True):
             if f.clutter_mean <= 0:
