@@ -397,6 +397,9 @@ class FormationConfig:
     mode: noise ``q_cv``, mean time in it ``cv_sojourn_time`` and turn-rate reset
     ``cv_turn_rate_std`` (formations fly steadily, so a member's estimate should not carry the
     turn mode's noise between turns; the coordinated-turn mode still follows their turns).
+    The members of a formation share one mode probability, to which every member's detection
+    contributes (a formation turns as one body), and a confirmed track that moves with a
+    formation for ``confirm_scans`` scans spanning ``confirm_time`` joins it.
 
     Off by default: on the paper's environments it holds the targets as well as the
     individual tracker alone, not better yet (``python -m benchmarks.formation``). A member that
@@ -435,7 +438,7 @@ class FormationConfig:
         le=1e6,
     )
     cv_turn_rate_std: float = _field(
-        0.02,
+        0.05,
         "the members' constant-velocity mode resets the turn rate with this std, rad/s",
         gt=0,
         le=10.0,

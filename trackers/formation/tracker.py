@@ -24,15 +24,18 @@ sensor's batch; several sensors' batches come one after another, each with its o
    and scaled about its centre (a formation that turns or opens up faster than its members'
    predictions follow), and the better match kept.
 4. **Update** (section III.C). Each matched member's IMM is updated with its detection when it
-   lies inside the member's gate; its score gains ``ln(P_D Λ / λ)``, a missed member's
-   ``ln(1 − P_D)``. The formation claims its matched detections and every other detection in
-   a member's gate, so none of them starts an individual track.
+   lies inside the member's gate; the members share one mode probability, the product of
+   their modes' likelihoods with the shared prediction (:func:`_shared_modes`). A member's
+   score gains ``ln(P_D Λ / λ)``, a missed member's ``ln(1 − P_D)``. The formation claims
+   its matched detections and every other detection in a member's gate, so none of them
+   starts an individual track.
 5. **Life cycle.** Groups of confirmed individual tracks that move together (the rules of
    :class:`~trackers.config.FormationConfig`) for several scans become formations, their
    tracks taken over under their ids; a formation can also be asked for by track ids
-   (:meth:`FormationTracker.request`), taken at the next scan. A member that leaves or goes
-   undetected too long is handed back to the point tracker; a formation of fewer than two
-   members ends, its last member handed back.
+   (:meth:`FormationTracker.request`), taken at the next scan. A confirmed track that moves
+   with a formation as long joins it (a member confirmed after the others). A member that
+   leaves or goes undetected too long is handed back to the point tracker; a formation of
+   fewer than two members ends, its last member handed back.
 """
 
 from __future__ import annotations
@@ -47,7 +50,13 @@ from trackers.association.gating import inverse_2x2, max_eigenvalue_2x2
 from trackers.association.spatial import pairs_within
 from trackers.config import FormationConfig, MotionConfig, TrackerConfig
 from trackers.extended.partition import component_labels
-from trackers.filters.imm import imm_combine, imm_predict, imm_update, transition_matrix
+from trackers.filters.imm import (
+    MU_FLOOR,
+    imm_combine,
+    imm_predict,
+    imm_update,
+    transition_matrix,
+)
 from trackers.formation.template import cell_sizes, match_template
 from trackers.models.motion import ConstantVelocity, CoordinatedTurn, build_models
 from trackers.peers import PeerProposal, PointTrackState, PointTrackView
@@ -138,6 +147,8 @@ class _State:
     formations: tuple[Formation, ...] = ()
     #: Groups of tracks seen moving together: sorted member ids → (first time, scans).
     groups: dict[tuple[str, ...], tuple[float, int]] = field(default_factory=dict)
+    #: Tracks seen moving with a formation: (formation id, track id) → (first time, scans).
+    joining: dict[tuple[str, str], tuple[float, int]] = field(default_factory=dict)
     requests: tuple[_Request, ...] = ()
     next_id: int = 1
     time: float | None = None
@@ -194,6 +205,80 @@ def _new_formation(
         started=view.time,
         last_update=float(view.updated[idx].max()),
     )
+
+
+def _joined(f: Formation, rows: Sequence[int], view: PointTrackView, config: TrackerConfig):
+    """``f`` with the view's tracks ``rows`` as new members, started as in
+    :func:`_new_formation`."""
+    new = _new_formation(f.id, rows, view, config)
+    return replace(
+        f,
+        members=f.members + new.members,
+        x=np.concatenate([f.x, new.x]),
+        P=np.concatenate([f.P, new.P]),
+        mu=np.concatenate([f.mu, new.mu]),
+        score=np.concatenate([f.score, new.score]),
+        hits=np.concatenate([f.hits, new.hits]),
+        created=np.concatenate([f.created, new.created]),
+        updated=np.concatenate([f.updated, new.updated]),
+        leaving=np.concatenate([f.leaving, new.leaving]),
+        detection_ids=f.detection_ids + new.detection_ids,
+    )
+
+
+def _joining(
+    view: PointTrackView,
+    formations: Sequence[Formation],
+    config: TrackerConfig,
+    counts: dict[tuple[str, str], tuple[float, int]],
+    t: float,
+    exclude: set[str],
+) -> tuple[dict[tuple[str, str], tuple[float, int]], dict[int, list[int]]]:
+    """Confirmed individual tracks moving with a formation: at least ``min_speed`` fast,
+    within ``max_spacing`` of one of its members and ``max_velocity_difference`` of that
+    member's velocity, no closer than the resolution distance to any member, and within
+    ``max_spacing`` of no other formation's member; counted across scans by (formation id,
+    track id). A member confirmed after its formation formed (or one handed back that
+    rejoins) so becomes a member after ``confirm_scans`` scans spanning ``confirm_time``.
+    Returns the new counts and, by formation index, the view rows ripe to join it."""
+    cfg = config.formation
+    if not formations or len(view) == 0:
+        return {}, {}
+    speed = np.hypot(view.x[:, 2], view.x[:, 3])
+    ok = view.confirmed & (speed >= cfg.min_speed)
+    if exclude:
+        ok &= np.array([tid not in exclude for tid in view.ids])
+    rows = np.flatnonzero(ok)
+    if rows.size == 0:
+        return {}, {}
+    p = np.take(view.x[:, :2], rows, axis=0)
+    v = np.take(view.x[:, 2:4], rows, axis=0)
+    d_res = config.extended.resolution_distance
+    near = np.zeros(rows.size, dtype=np.int64)
+    moving_with: list[tuple[int, int]] = []
+    for fi, f in enumerate(formations):
+        x, _ = f.combined()
+        d = np.hypot(p[:, None, 0] - x[None, :, 0], p[:, None, 1] - x[None, :, 1])
+        nearest = np.argmin(d, axis=1)
+        d_min = d[np.arange(rows.size), nearest]
+        dv = np.hypot(*(v - x[nearest, 2:4]).T)
+        near += d_min <= cfg.max_spacing
+        with_f = (d_min <= cfg.max_spacing) & (d_min >= d_res) & (dv <= cfg.max_velocity_difference)
+        moving_with.extend((fi, j) for j in np.flatnonzero(with_f).tolist())
+    out: dict[tuple[str, str], tuple[float, int]] = {}
+    ripe: dict[int, list[int]] = {}
+    for fi, j in moving_with:
+        if near[j] > 1:
+            continue  # near two formations: neither's until it is clear
+        row = int(rows[j])
+        key = (formations[fi].id, view.ids[row])
+        first, n = counts.get(key, (t, 0))
+        n += 1
+        if n >= cfg.confirm_scans and t - first >= cfg.confirm_time:
+            ripe.setdefault(fi, []).append(row)
+        else:
+            out[key] = (first, n)
+    return out, ripe
 
 
 class FormationTracker:
@@ -274,13 +359,15 @@ class FormationTracker:
         claimed = np.zeros(scan.size, dtype=bool)
         if not cfg.enabled:
             if not st.formations and not st.requests:
-                return PeerProposal(claimed=claimed, state=replace(st, time=t, groups={}))
+                return PeerProposal(
+                    claimed=claimed, state=replace(st, time=t, groups={}, joining={})
+                )
             handed = tuple(_handed(f, np.arange(len(f)), t) for f in st.formations)
             return PeerProposal(
                 claimed=claimed,
                 hand_back=tuple(s for group in handed for s in group),
                 deleted=tuple(f.id for f in st.formations),
-                state=replace(st, formations=(), requests=(), groups={}, time=t),
+                state=replace(st, formations=(), requests=(), groups={}, joining={}, time=t),
             )
         models = _models(config)
         formations = _predicted(st.formations, models, config, t)
@@ -293,6 +380,10 @@ class FormationTracker:
             if len(live) >= 2:
                 formations.append(_new_formation(req.id, [index[m] for m in live], view, config))
                 taken.extend(live)
+        joining, joins = _joining(view, formations, config, st.joining, t, exclude=set(taken))
+        for fi, rows in joins.items():
+            formations[fi] = _joined(formations[fi], rows, view, config)
+            taken.extend(view.ids[i] for i in rows)
         groups, ripe = _moving_together(view, config, st.groups, t, exclude=set(taken))
         for rows in ripe:
             formations.append(_new_formation(f"{self.id_prefix}F{next_id}", rows, view, config))
@@ -329,6 +420,7 @@ class FormationTracker:
             st,
             formations=tuple(kept),
             groups=groups,
+            joining=joining,
             requests=(),
             next_id=next_id,
             time=t,
@@ -512,7 +604,10 @@ def _update(
             np.take(Rz, d, axis=0),
             _H,
         )
+        shared = _shared_modes(mu_all, muu, r, starts)
         x_all[r], P_all[r], mu_all[r] = xu, Pu, muu
+        for sl, mu_f in shared:
+            mu_all[sl] = mu_f
         score[r] += math.log(pd) - math.log1p(-min(pd, 1.0 - 1e-12)) + ll - math.log(lam)
         hits[r] += 1
         updated[r] = scan.time
@@ -538,6 +633,33 @@ def _update(
             )
         )
     return out, claimed
+
+
+def _shared_modes(
+    c_bar: np.ndarray, mu: np.ndarray, rows: np.ndarray, starts: np.ndarray
+) -> list[tuple[slice, np.ndarray]]:
+    """One mode probability vector per formation with a member updated: a formation flies as
+    one body, so its members are in the same mode, and every member's detection is evidence
+    for it. With ``c̄`` the members' predicted mode probabilities (shared, so their mean) and
+    ``μ_i ∝ Λ_i c̄_i`` the posterior of updated member ``i`` (``rows``)::
+
+        μ_f ∝ c̄ Π_i Λ_i = c̄ Π_i (μ_i / c̄_i)
+
+    floored at :data:`~trackers.filters.imm.MU_FLOOR`. Returns (the formation's rows,
+    ``μ_f``) for each formation with an updated member (``starts``: the first row of each)."""
+    out: list[tuple[slice, np.ndarray]] = []
+    log_ratio = np.log(np.maximum(mu, MU_FLOOR)) - np.log(np.maximum(c_bar[rows], MU_FLOOR))
+    for i in range(len(starts) - 1):
+        lo, hi = int(starts[i]), int(starts[i + 1])
+        sel = (rows >= lo) & (rows < hi)
+        if not sel.any():
+            continue
+        prior = np.maximum(c_bar[lo:hi].mean(axis=0), MU_FLOOR)
+        log_mu = np.log(prior) + log_ratio[sel].sum(axis=0)
+        w = np.exp(log_mu - log_mu.max())
+        w = np.maximum(w / w.sum(), MU_FLOOR)
+        out.append((slice(lo, hi), w / w.sum()))
+    return out
 
 
 def _missed(f: Formation, pd: float) -> Formation:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -16,7 +17,14 @@ from clients.scenarios.airspace import (
 )
 from clients.scenarios.formation import environment_1, run_figures, simulate_formations
 from trackers.config import TrackerConfig
-from trackers.formation.tracker import FormationTracker, _moving_together, member_motion
+from trackers.formation.tracker import (
+    FormationTracker,
+    _joining,
+    _moving_together,
+    _new_formation,
+    _shared_modes,
+    member_motion,
+)
 from trackers.peers import PointTrackView
 from trackers.pipeline import TrackingPipeline
 
@@ -113,6 +121,39 @@ def test_members_velocity_settles_below_the_individual_trackers() -> None:
     formed = steady(run_figures(scenario, TrackingPipeline.all_kinds(ON)))
     alone = steady(run_figures(scenario, TrackingPipeline(TrackerConfig())))
     assert formed < 1.5 and formed < 0.5 * alone, (formed, alone)
+
+
+def test_a_formations_members_share_one_mode_probability() -> None:
+    """μ_f ∝ c̄ Π_i μ_i / c̄_i over the updated members of each formation; a formation
+    without an update keeps its prediction."""
+    c_bar = np.array([[0.9, 0.1]] * 3 + [[0.5, 0.5]] * 2)  # formation 0: rows 0-2; 1: 3-4
+    mu = np.array([[0.6, 0.4], [0.7, 0.3]])  # the posteriors of rows 0 and 2
+    out = _shared_modes(c_bar, mu, np.array([0, 2]), np.array([0, 3, 5]))
+    assert len(out) == 1 and out[0][0] == slice(0, 3)
+    w = np.array([0.9, 0.1]) * (mu[0] / c_bar[0]) * (mu[1] / c_bar[2])
+    np.testing.assert_allclose(out[0][1], w / w.sum())
+    assert out[0][1][1] > 0.7  # two members' evidence for the turn mode outweighs the prior
+
+
+def test_a_track_moving_with_a_formation_joins_it_after_its_scans() -> None:
+    cfg = ON
+    members = _view([(0.0, 0.0), (300.0, 0.0), (600.0, 0.0)], (250.0, 0.0))
+    f = _new_formation("F1", [0, 1, 2], members, cfg)
+    # T1 moves with it 400 m behind; T2 as fast but 40 m/s across; T3 inside the resolution
+    # distance of a member (one unresolved object); T4 too far
+    others = _view([(-400.0, 0.0), (0.0, 500.0), (650.0, 50.0), (0.0, 3000.0)], (250.0, 0.0))
+    x = others.x.copy()
+    x[1, 3] = 40.0
+    others = dataclasses.replace(others, x=x)
+    counts: dict = {}
+    for k in range(cfg.formation.confirm_scans):
+        t = 1.0 * k
+        counts, ripe = _joining(others, [f], cfg, counts, t, exclude=set())
+        if k < cfg.formation.confirm_scans - 1:
+            assert ripe == {} and set(counts) == {("F1", "T1")}
+    assert ripe == {0: [0]} and counts == {}
+    # a track taken this scan by someone else is not counted
+    assert _joining(others, [f], cfg, {}, 0.0, exclude={"T1"}) == ({}, {})
 
 
 def test_formations_are_off_by_default() -> None:
