@@ -22,6 +22,7 @@ One step, for a scan at time t with detections z_j (covariances R_j):
 
 from __future__ import annotations
 
+import math
 import re
 from collections.abc import Sequence
 from dataclasses import dataclass, fields, replace
@@ -32,7 +33,13 @@ from trackers.association.gating import gate
 from trackers.association.gnn import gnn_assign
 from trackers.association.manoeuvre import ManoeuvreMatch, manoeuvre_search
 from trackers.config import TrackerConfig
-from trackers.filters.imm import imm_combine, imm_predict, imm_update, transition_matrix
+from trackers.filters.imm import (
+    imm_combine,
+    imm_predict,
+    imm_range_rate_update,
+    imm_update,
+    transition_matrix,
+)
 from trackers.initiation import MIN_PAIR_INTERVAL, Candidates, pair_candidates
 from trackers.models.measurement import H_POSITION
 from trackers.models.motion import STATE_DIM, build_models
@@ -382,6 +389,7 @@ class IndividualTracker:
         xu, Pu, muu, loglik = imm_update(
             x_pred[ti], P_pred[ti], c_bar[ti], scan.z[dj], scan.R[dj], H_POSITION
         )
+        xu, Pu, muu, loglik = _with_range_rates(xu, Pu, muu, loglik, scan, dj, config)
         hit = hit_increment(pd[ti], loglik, lam_fa)
         gain = hit - miss_increment(pd[ti])
         # Confirmed tracks choose first; tentative tracks share what they leave. A young track
@@ -982,6 +990,39 @@ def _manoeuvre_found(
     if found is None:
         return None
     return replace(found, track=lost[found.track], detection=free[found.detection])
+
+
+def _with_range_rates(
+    x: np.ndarray,
+    P: np.ndarray,
+    mu: np.ndarray,
+    loglik: np.ndarray,
+    scan: Scan,
+    det: np.ndarray,
+    config: TrackerConfig,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The pairs' posteriors updated again with their detections' range-rates, where the
+    scan has them and a sensor position (:func:`trackers.filters.imm.imm_range_rate_update`),
+    and their log-likelihoods grown by the range-rate's likelihood ratio against a false
+    alarm's, uniform within ``±initiation.max_speed``: ``ln Λ + ln(2 v_max)``."""
+    if scan.range_rate is None or scan.sensor_position is None or det.size == 0:
+        return x, P, mu, loglik
+    rdot = np.take(scan.range_rate, det)
+    have = np.flatnonzero(np.isfinite(rdot))
+    if have.size == 0:
+        return x, P, mu, loglik
+    x, P, mu, loglik = x.copy(), P.copy(), mu.copy(), loglik.copy()
+    xh, Ph, muh, dll = imm_range_rate_update(
+        x[have],
+        P[have],
+        mu[have],
+        rdot[have],
+        np.asarray(scan.sensor_position, dtype=float),
+        config.measurement.range_rate_std**2,
+    )
+    x[have], P[have], mu[have] = xh, Ph, muh
+    loglik[have] += dll + math.log(2.0 * config.initiation.max_speed)
+    return x, P, mu, loglik
 
 
 def _missed_branch(time: np.ndarray, score: np.ndarray, t: float, miss: float) -> np.ndarray:

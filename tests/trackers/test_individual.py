@@ -200,3 +200,54 @@ def test_snapshot_is_consistent_with_step_result():
         np.testing.assert_allclose(t.covariance, t.covariance.T)
         assert np.all(np.linalg.eigvalsh(t.covariance) > 0)
         assert sum(t.model_probabilities.values()) == pytest.approx(1.0)
+
+
+def _receding_target(rdot_scale: float | None, seed: int = 0, scans: int = 25):
+    """A 290 m/s target 20 km out, T = 2 s, 50 m position noise, seen with range-rates of
+    1 m/s noise (times ``rdot_scale``; none when it is None); the tracker's results."""
+    rng = np.random.default_rng(seed)
+    tracker = IndividualTracker(TrackerConfig())
+    x0, v, sensor = np.array([20e3, 5e3]), np.array([-250.0, 150.0]), np.zeros(2)
+    out = []
+    for k in range(scans):
+        pos = x0 + v * 2.0 * k
+        z = pos + rng.normal(0.0, 50.0, 2)
+        extra = {}
+        if rdot_scale is not None:
+            rdot = (pos @ v) / np.hypot(*pos) + rng.normal(0.0, 1.0)
+            extra = {"sensor_position": sensor, "range_rate": np.array([rdot * rdot_scale])}
+        scan = Scan("r", 2.0 * k, z[None], np.eye(2)[None] * 2500.0, **extra)
+        out.append(tracker.step(scan).confirmed())
+    return out, v
+
+
+def test_range_rates_confirm_sooner_and_pin_the_velocity_down() -> None:
+    plain, v = _receding_target(None)
+    with_vr, _ = _receding_target(1.0)
+    first = [next(k for k, c in enumerate(run) if c) for run in (plain, with_vr)]
+    assert first[1] < first[0]
+    err = [float(np.hypot(*(np.array(run[-1][0].velocity) - v))) for run in (plain, with_vr)]
+    assert err[1] < 2.0 and err[1] < 0.5 * err[0], err
+
+
+def test_range_rates_that_contradict_the_motion_confirm_nothing() -> None:
+    wrong, _ = _receding_target(-50.0)  # the wrong sign, 50 times too fast
+    assert not any(wrong)
+
+
+def test_a_detection_without_its_range_rate_is_a_position_only() -> None:
+    """NaN in ``range_rate``: that detection updates the track with its position alone."""
+    runs = []
+    for rr in (None, np.nan):
+        rng = np.random.default_rng(3)
+        tracker = IndividualTracker(TrackerConfig())
+        for k in range(12):
+            z = np.array([1000.0 + 20.0 * k, 0.0]) + rng.normal(0.0, 10.0, 2)
+            extra = (
+                {} if rr is None else {"sensor_position": np.zeros(2), "range_rate": np.array([rr])}
+            )
+            tracker.step(Scan("r", float(k), z[None], np.eye(2)[None] * 100.0, **extra))
+        runs.append(tracker.snapshot())
+    assert runs[0] and [(t.id, t.position, t.score) for t in runs[0]] == [
+        (t.id, t.position, t.score) for t in runs[1]
+    ]

@@ -27,6 +27,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from trackers.filters.kalman import update_state_major
+from trackers.models.measurement import range_rate_update
 from trackers.models.motion import (
     MotionModel,
     batch_major,
@@ -41,6 +42,7 @@ __all__ = [
     "imm_combine",
     "imm_mix",
     "imm_predict",
+    "imm_range_rate_update",
     "imm_update",
     "transition_matrix",
 ]
@@ -259,6 +261,40 @@ def imm_update(
         mu_out[rows] = mu.T
         ll_out[rows] = ll
     return x_out, P_out, mu_out, ll_out
+
+
+def imm_range_rate_update(
+    x: np.ndarray,
+    P: np.ndarray,
+    mu: np.ndarray,
+    rdot: np.ndarray,
+    sensor: np.ndarray,
+    variance: float,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The mode-conditioned posteriors of :func:`imm_update` updated again, in sequence, with
+    range-rates ``rdot (N,)`` of variance ``σ_ṙ²`` from ``sensor (2,)``
+    (:func:`trackers.models.measurement.range_rate_update` in every mode)::
+
+        x_j, P_j, ln Λ_j = range_rate_update(x_j, P_j, ṙ)
+        μ_j ← μ_j Λ_j / Σ_i μ_i Λ_i,        Δ ln Λ = ln Σ_j μ_j Λ_j
+
+    x (N, M, n), P (N, M, n, n), mu (N, M). Returns new ``x``, ``P``, ``mu`` (floored at
+    :data:`MU_FLOOR`) and ``Δ ln Λ (N,)``, to add to the position's log-likelihood."""
+    x = np.asarray(x, dtype=float)
+    P = np.asarray(P, dtype=float)
+    mu = np.asarray(mu, dtype=float)
+    N, M, n = _check_shapes(x, P, mu)
+    rdot = np.repeat(np.asarray(rdot, dtype=float).reshape(N), M)
+    xs, Ps, ll = range_rate_update(
+        x.reshape(N * M, n), P.reshape(N * M, n, n), rdot, sensor, variance
+    )
+    ll = ll.reshape(N, M)
+    log_w = ll + np.log(np.maximum(mu, _TINY))
+    peak = log_w.max(axis=1, keepdims=True)
+    w = np.exp(log_w - peak)
+    total = w.sum(axis=1, keepdims=True)
+    mu_new = _floor_probabilities(w / total, axis=1)
+    return xs.reshape(N, M, n), Ps.reshape(N, M, n, n), mu_new, (np.log(total) + peak)[:, 0]
 
 
 def imm_combine(x: np.ndarray, P: np.ndarray, mu: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

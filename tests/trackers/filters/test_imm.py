@@ -15,6 +15,7 @@ from trackers.filters.imm import (
     imm_combine,
     imm_mix,
     imm_predict,
+    imm_range_rate_update,
     imm_update,
     transition_matrix,
 )
@@ -456,3 +457,28 @@ def test_cv_mode_turn_rate_stays_bounded() -> None:
         assert np.all(P[0, :, 4, 4] < 0.01)
         assert np.all(np.linalg.eigvalsh(P[0]) > 0)
     assert abs(x[0, 1, 4] - 0.12) < 0.02  # the CT mode found the true turn rate
+
+
+def test_range_rate_update_in_every_mode_and_the_mode_probabilities() -> None:
+    """Each mode's posterior gets the EKF range-rate step; μ_j ∝ μ_j Λ_j and
+    Δ ln Λ = ln Σ μ_j Λ_j: the mode whose velocity agrees with the range-rate gains."""
+    from trackers.models.measurement import range_rate_update
+
+    sensor = np.array([0.0, 0.0])
+    x = np.array([[[3000.0, 4000.0, 6.0, 8.0, 0.0], [3000.0, 4000.0, -6.0, -8.0, 0.0]]])
+    P = np.tile(np.diag([100.0, 100.0, 4.0, 4.0, 1e-4]), (1, 2, 1, 1))
+    mu = np.array([[0.5, 0.5]])
+    xn, Pn, mun, dll = imm_range_rate_update(x, P, mu, np.array([10.0]), sensor, 1.0)
+    for j in range(2):
+        xe, Pe, lle = range_rate_update(x[:, j], P[:, j], np.array([10.0]), sensor, 1.0)
+        np.testing.assert_allclose(xn[:, j], xe)
+        np.testing.assert_allclose(Pn[:, j], Pe)
+        if j == 0:
+            ll0 = lle[0]
+        else:
+            ll1 = lle[0]
+    w = 0.5 * np.exp([ll0, ll1])
+    floored = np.maximum(w / w.sum(), MU_FLOOR)
+    np.testing.assert_allclose(mun[0], floored / floored.sum())
+    assert dll[0] == pytest.approx(math.log(w.sum()))
+    assert mun[0, 0] > 0.99  # receding at 10 m/s: the first mode

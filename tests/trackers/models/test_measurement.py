@@ -1,11 +1,17 @@
-"""The position measurement matrix."""
+"""The position measurement matrix and the range-rate measurement."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from trackers.models.measurement import H_POSITION, MEASUREMENT_DIM
+from trackers.models.measurement import (
+    H_POSITION,
+    MEASUREMENT_DIM,
+    range_rate,
+    range_rate_jacobian,
+    range_rate_update,
+)
 
 
 def test_h_position_picks_the_position() -> None:
@@ -18,3 +24,67 @@ def test_h_position_picks_the_position() -> None:
 def test_h_position_is_read_only() -> None:
     with pytest.raises(ValueError):
         H_POSITION[0, 0] = 2.0
+
+
+def _states() -> np.ndarray:
+    return np.array(
+        [
+            [1000.0, 500.0, 30.0, -10.0, 0.01],
+            [-2e4, 3e4, -250.0, 120.0, 0.0],
+            [50.0, -80.0, 0.0, 0.0, 0.0],
+        ]
+    )
+
+
+def test_range_rate_is_the_velocity_along_the_line_of_sight() -> None:
+    sensor = np.array([100.0, -200.0])
+    x = _states()
+    d = x[:, :2] - sensor
+    expected = np.sum(d * x[:, 2:4], axis=1) / np.hypot(*d.T)
+    np.testing.assert_allclose(range_rate(x, sensor), expected)
+    # going straight away at 10 m/s
+    away = np.array([[sensor[0] + 3e3, sensor[1], 10.0, 0.0, 0.0]])
+    assert range_rate(away, sensor)[0] == pytest.approx(10.0)
+
+
+def test_range_rate_jacobian_against_finite_differences() -> None:
+    sensor = np.array([100.0, -200.0])
+    x = _states()
+    J = range_rate_jacobian(x, sensor)
+    eps = 1e-4
+    for i in range(x.shape[1]):
+        step = np.zeros_like(x)
+        step[:, i] = eps
+        fd = (range_rate(x + step, sensor) - range_rate(x - step, sensor)) / (2 * eps)
+        np.testing.assert_allclose(J[:, i], fd, rtol=1e-6, atol=1e-9)
+
+
+def test_range_rate_update_is_the_ekf_step() -> None:
+    sensor = np.array([0.0, 0.0])
+    x = np.array([[3000.0, 4000.0, 10.0, 0.0, 0.0]])
+    P = np.diag([100.0, 100.0, 25.0, 25.0, 1e-4])[None]
+    rdot = np.array([9.0])
+    xn, Pn, ll = range_rate_update(x, P, rdot, sensor, 0.25)
+    J = range_rate_jacobian(x, sensor)[0]
+    S = J @ P[0] @ J + 0.25
+    K = P[0] @ J / S
+    nu = 9.0 - range_rate(x, sensor)[0]
+    np.testing.assert_allclose(xn[0], x[0] + K * nu)
+    A = np.eye(5) - np.outer(K, J)
+    np.testing.assert_allclose(Pn[0], A @ P[0] @ A.T + 0.25 * np.outer(K, K), atol=1e-9)
+    assert ll[0] == pytest.approx(-0.5 * (np.log(2 * np.pi * S) + nu * nu / S))
+    # the velocity along the line of sight is pinned down; across it, nothing changes
+    los = np.array([0.6, 0.8])
+    across = np.array([-0.8, 0.6])
+    assert los @ Pn[0, 2:4, 2:4] @ los < 0.25 * (los @ P[0, 2:4, 2:4] @ los)
+    assert across @ Pn[0, 2:4, 2:4] @ across == pytest.approx(25.0, rel=1e-3)
+    assert not np.shares_memory(xn, x) and x[0, 2] == 10.0  # the input is not changed
+
+
+def test_range_rate_at_the_sensor_changes_nothing() -> None:
+    x = np.array([[0.2, 0.1, 5.0, 5.0, 0.0]])
+    P = np.eye(5)[None]
+    xn, Pn, ll = range_rate_update(x, P, np.array([3.0]), np.zeros(2), 1.0)
+    np.testing.assert_array_equal(xn, x)
+    np.testing.assert_array_equal(Pn, P)
+    assert ll[0] == 0.0
