@@ -295,6 +295,14 @@ class RecentBatches:
 REFUSAL_LOG_INTERVAL = 10.0
 
 
+def _printable(text: str) -> str:
+    """``text`` with control characters escaped (``\\n``, ``\\x1b``): a sender's field names
+    and values cannot start a line of their own in the log."""
+    if text.isprintable():
+        return text
+    return "".join(c if c.isprintable() else c.encode("unicode_escape").decode() for c in text)
+
+
 class Refusals:
     """Refuses batches: counts each in the stats, publishes its Error report and resolves its
     future. Drops (``overloaded``) are logged at most once a second; refusals at warning level,
@@ -354,11 +362,15 @@ class Refusals:
             item.future.set_result(IngestResult(False, error=report))
 
     def flush_log(self) -> None:
-        """Log the drops not logged yet."""
+        """Log the drops and the refusals not logged yet."""
         with self._log_lock:
             n, self._unlogged = self._unlogged, 0
+            refused = {r: k for r, (_, k) in self._refusal_log.items() if k}
+            self._refusal_log = {r: (last, 0) for r, (last, _) in self._refusal_log.items()}
         if n:
             log.warning("%d more batch(es) dropped", n)
+        for reason, k in sorted(refused.items()):
+            log.warning("%d more batch(es) refused, %s", k, reason)
 
     @staticmethod
     def report(
@@ -389,7 +401,7 @@ class Refusals:
             reason,
             report.get("sensor_id"),
             report.get("time"),
-            str(report.get("detail"))[:200],
+            _printable(str(report.get("detail")))[:200],
             more,
         )
 

@@ -316,7 +316,8 @@ class Settings(BaseSettings):
             "the demo's scenario: continuous (targets come and go), reference (the 100 s "
             "reference scenario in a loop), convoy or harbour (extended objects, in a loop), "
             "formation (paper 003's formations and three radars, in a loop; switches "
-            "formation tracking on)"
+            "formation tracking on in the running configuration, which a later change of the "
+            "configuration saves to the config file with the rest)"
         ),
     )
     demo_speed: float = Field(

@@ -12,6 +12,8 @@ import math
 from dataclasses import asdict, dataclass, field, fields, is_dataclass
 from typing import Any, get_args, get_origin, get_type_hints
 
+from scipy.special import ndtri
+
 __all__ = [
     "ASSOCIATION_METHODS",
     "INITIATION_METHODS",
@@ -256,6 +258,12 @@ class GatingConfig:
     def threshold(self) -> float:
         """γ with P(χ²₂ ≤ γ) = P_G: for two degrees of freedom γ = −2 ln(1 − P_G)."""
         return -2.0 * math.log1p(-self.gate_probability)
+
+    @property
+    def threshold_1d(self) -> float:
+        """γ₁ with P(χ²₁ ≤ γ₁) = P_G, for a scalar innovation (a range-rate):
+        γ₁ = Φ⁻¹((1 + P_G)/2)²."""
+        return float(ndtri(0.5 * (1.0 + self.gate_probability))) ** 2
 
 
 @dataclass(frozen=True)

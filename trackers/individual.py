@@ -41,7 +41,7 @@ from trackers.filters.imm import (
     transition_matrix,
 )
 from trackers.initiation import MIN_PAIR_INTERVAL, Candidates, pair_candidates
-from trackers.models.measurement import H_POSITION
+from trackers.models.measurement import H_POSITION, MIN_RANGE, range_rate_innovation
 from trackers.models.motion import STATE_DIM, build_models
 from trackers.peers import PointDirectives, PointProposal, PointTrackState, PointTrackView
 from trackers.rows import RowArrays, sort_within_groups
@@ -1004,21 +1004,30 @@ def _with_range_rates(
     """The pairs' posteriors updated again with their detections' range-rates, where the
     scan has them and a sensor position (:func:`trackers.filters.imm.imm_range_rate_update`),
     and their log-likelihoods grown by the range-rate's likelihood ratio against a false
-    alarm's, uniform within ``±initiation.max_speed``: ``ln Λ + ln(2 v_max)``."""
+    alarm's, uniform within ``±initiation.max_speed``: ``ln Λ + ln(2 v_max)``.
+
+    A range-rate outside its gate (``ν²/S > γ₁`` of the pair's combined estimate, one degree
+    of freedom, ``gating.gate_probability``) is not used: the pair keeps its position-only
+    update, so a sensor whose Doppler is aliased, missing (reported as 0) or of the wrong sign
+    loses nothing against one that sends none. Nor is one where the track is within
+    :data:`~trackers.models.measurement.MIN_RANGE` of the sensor."""
     if scan.range_rate is None or scan.sensor_position is None or det.size == 0:
         return x, P, mu, loglik
     rdot = np.take(scan.range_rate, det)
     have = np.flatnonzero(np.isfinite(rdot))
     if have.size == 0:
         return x, P, mu, loglik
+    sensor = np.asarray(scan.sensor_position, dtype=float)
+    variance = config.measurement.range_rate_std**2
+    xc, Pc = imm_combine(x[have], P[have], mu[have])
+    nu, S = range_rate_innovation(xc, Pc, rdot[have], sensor, variance)
+    far = np.hypot(xc[:, 0] - sensor[0], xc[:, 1] - sensor[1]) >= MIN_RANGE
+    have = have[(nu * nu <= config.gating.threshold_1d * S) & far]
+    if have.size == 0:
+        return x, P, mu, loglik
     x, P, mu, loglik = x.copy(), P.copy(), mu.copy(), loglik.copy()
     xh, Ph, muh, dll = imm_range_rate_update(
-        x[have],
-        P[have],
-        mu[have],
-        rdot[have],
-        np.asarray(scan.sensor_position, dtype=float),
-        config.measurement.range_rate_std**2,
+        x[have], P[have], mu[have], rdot[have], sensor, variance
     )
     x[have], P[have], mu[have] = xh, Ph, muh
     loglik[have] += dll + math.log(2.0 * config.initiation.max_speed)

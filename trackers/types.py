@@ -72,6 +72,15 @@ class Scan:
         if len(ids) != z.shape[0]:
             raise ScanRejected("invalid_scan", f"{z.shape[0]} detections but {len(ids)} ids")
         object.__setattr__(self, "detection_ids", ids)
+        for name in ("range_rate", "amplitude"):
+            value = getattr(self, name)
+            if value is not None:
+                arr = np.asarray(value, dtype=float).reshape(-1)
+                if arr.shape[0] != z.shape[0]:
+                    raise ScanRejected(
+                        "invalid_scan", f"{z.shape[0]} detections but {arr.shape[0]} {name}s"
+                    )
+                object.__setattr__(self, name, arr)
 
     @property
     def size(self) -> int:

@@ -197,10 +197,20 @@ def test_refusals_are_logged_once_per_reason_and_interval(
         refusals.refuse(b"{", "radar-2", "invalid_json", "EOF" + "x" * 1000)
         clock[0] += ingest.REFUSAL_LOG_INTERVAL
         refusals.refuse(nan, None, "invalid_batch", "detections[0].x: not a number")
+        refusals.refuse(nan, None, "invalid_batch", "detections[0].x: not a number")
+        refusals.refuse(b"{", "radar-3", "sensor_mismatch", "a\nWARNING fake line")
+        refusals.flush_log()  # the refusals counted since the last line
     lines = [r.getMessage() for r in caplog.records]
     assert lines[0] == (
         "batch refused, invalid_batch, sensor s-1, time 3.0: detections[0].x: not a number"
     )
+    # a sender's text cannot start a log line of its own
+    assert (
+        lines[-2]
+        == "batch refused, sensor_mismatch, sensor radar-3, time None: a\\nWARNING fake line"
+    )
+    assert lines[-1] == "1 more batch(es) refused, invalid_batch"
+    lines = lines[:-2]
     assert lines[1].startswith("batch refused, invalid_json, sensor radar-2, time None: EOFxx")
     assert len(lines[1]) < 300  # the detail is cut short
     assert lines[2].endswith("(4 more invalid_batch since the last such line)")

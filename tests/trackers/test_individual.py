@@ -230,9 +230,23 @@ def test_range_rates_confirm_sooner_and_pin_the_velocity_down() -> None:
     assert err[1] < 2.0 and err[1] < 0.5 * err[0], err
 
 
-def test_range_rates_that_contradict_the_motion_confirm_nothing() -> None:
-    wrong, _ = _receding_target(-50.0)  # the wrong sign, 50 times too fast
-    assert not any(wrong)
+@pytest.mark.parametrize("rdot", [57.0, 500.0, -2000.0])
+def test_a_range_rate_outside_its_gate_is_not_used(rdot: float) -> None:
+    """A settled track (20 scans of positions) given a range-rate that contradicts it (the
+    wrong sign, aliased) is updated as if it had none."""
+    runs = []
+    for given in (False, True):
+        rng = np.random.default_rng(5)
+        tracker = IndividualTracker(TrackerConfig())
+        for k in range(21):
+            pos = np.array([20e3, 5e3]) + np.array([-250.0, 150.0]) * 2.0 * k
+            z = pos + rng.normal(0.0, 50.0, 2)
+            extra = {}
+            if given and k == 20:  # the true range-rate is then -57 m/s
+                extra = {"sensor_position": np.zeros(2), "range_rate": np.array([rdot])}
+            tracker.step(Scan("r", 2.0 * k, z[None], np.eye(2)[None] * 2500.0, **extra))
+        runs.append([(t.id, t.position, t.velocity, t.score) for t in tracker.snapshot()])
+    assert runs[0] and runs[1] == runs[0]
 
 
 def test_a_detection_without_its_range_rate_is_a_position_only() -> None:

@@ -107,6 +107,15 @@ def test_bad_scans_are_rejected_and_change_nothing(scan, reason, text):
     assert p.last_time == 2.0
 
 
+def test_range_rates_and_amplitudes_are_one_per_detection():
+    z, R = np.zeros((2, 2)), np.tile(np.eye(2), (2, 1, 1))
+    for name in ("range_rate", "amplitude"):
+        with pytest.raises(ScanRejected, match=f"2 detections but 3 {name}s"):
+            Scan("s", 0.0, z, R, **{name: np.ones(3)})
+    scan = Scan("s", 0.0, z, R, range_rate=[1.0, np.nan], sensor_position=np.zeros(2))
+    assert scan.range_rate.shape == (2,) and np.isnan(scan.range_rate[1])
+
+
 def test_equal_times_are_in_sequence():
     check_scan(scan_at(1.0, [0, 0]), 1.0)
 

@@ -43,6 +43,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
+from functools import lru_cache
 
 import numpy as np
 
@@ -176,8 +177,15 @@ def member_motion(config: TrackerConfig) -> MotionConfig:
 
 
 def _models(config: TrackerConfig) -> tuple[ConstantVelocity | CoordinatedTurn, ...]:
-    """The members' modes (:func:`member_motion`)."""
-    return build_models(member_motion(config))
+    """The members' modes (:func:`member_motion`), built once per configuration."""
+    return _models_of(config.motion, config.formation)
+
+
+@lru_cache(maxsize=8)
+def _models_of(
+    motion: MotionConfig, formation: FormationConfig
+) -> tuple[ConstantVelocity | CoordinatedTurn, ...]:
+    return build_models(member_motion(TrackerConfig(motion=motion, formation=formation)))
 
 
 def _new_formation(

@@ -17,6 +17,7 @@ __all__ = [
     "H_POSITION",
     "MEASUREMENT_DIM",
     "range_rate",
+    "range_rate_innovation",
     "range_rate_jacobian",
     "range_rate_update",
 ]
@@ -61,6 +62,18 @@ def range_rate_jacobian(x: np.ndarray, sensor: np.ndarray) -> np.ndarray:
     J[:, 2] = dx / rho
     J[:, 3] = dy / rho
     return J
+
+
+def range_rate_innovation(
+    x: np.ndarray, P: np.ndarray, rdot: np.ndarray, sensor: np.ndarray, variance: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """``ν = ṙ − h(x)`` and ``S = J P Jᵀ + σ_ṙ²`` of states ``x (K, n)``, ``P (K, n, n)``: the
+    range-rate innovation and its variance, for gating (``ν²/S ≤ γ₁``)."""
+    x = np.asarray(x, dtype=float)
+    sensor = np.asarray(sensor, dtype=float).reshape(2)
+    J = range_rate_jacobian(x, sensor)
+    S = np.einsum("ki,kij,kj->k", J, np.asarray(P, dtype=float), J) + float(variance)
+    return np.asarray(rdot, dtype=float) - range_rate(x, sensor), S
 
 
 def range_rate_update(
