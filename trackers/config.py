@@ -158,16 +158,25 @@ class MotionConfig:
 @dataclass(frozen=True)
 class MeasurementConfig:
     """``position_std`` (m): the position noise used when neither detection nor batch has a cov.
-    ``range_rate_std`` (m/s): the noise of a detection's range-rate (``vr``, seen from the
-    batch's ``sensor_position``), which updates a track after its position (an extended
-    Kalman update); a false alarm's range-rate is taken as uniform within
-    ``±initiation.max_speed``, so a consistent one adds ``ln(2 v_max N(ν; 0, S))`` to the
-    track's score and an inconsistent one takes from it."""
+    ``range_rate_std`` (m/s): the noise assumed for a detection's range-rate (``vr``, seen
+    from the batch's ``sensor_position``), which updates a track after its position (an
+    extended Kalman update). 10 m/s by default, more than a Doppler radar's own noise: in a
+    manoeuvre's first scans each mode's velocity is off by more than its covariance says, and
+    a tighter value then hands the track to the wrong mode (a 3 g turn at T = 4 s through a
+    missed scan was lost at 1-5 m/s and held at 10). A false alarm's range-rate is taken as
+    uniform within ``±initiation.max_speed``, so a consistent one adds
+    ``ln(2 v_max N(ν; 0, S))`` to the track's score."""
 
     position_std: float = _field(
         10.0, "position noise per axis, m, of detections that carry no covariance", ge=1e-3, le=1e5
     )
-    range_rate_std: float = _field(1.0, "noise of a detection's range-rate (vr), m/s", gt=0, le=1e4)
+    range_rate_std: float = _field(
+        10.0,
+        "range-rate (vr) noise the filter assumes, m/s: the sensor's, and what a manoeuvre adds"
+        " to a mode's velocity error between scans",
+        gt=0,
+        le=1e4,
+    )
 
     def __post_init__(self) -> None:
         _check_bounds(self, "measurement")

@@ -405,6 +405,11 @@ class IndividualTracker:
         found = _manoeuvre_found(pred, scan, ti[sel], dj[first], pd, lam_fa)
         if found is not None:
             taken[found.detection] = True
+            zero = np.zeros(found.track.size)
+            fx, fP, fmu, extra = _with_range_rates(
+                found.x, found.P, found.mu, zero, scan, found.detection, config
+            )
+            found = replace(found, x=fx, P=fP, mu=fmu, hit=found.hit + extra)
         second = np.flatnonzero(~first & ~taken[dj])
         sel = np.concatenate(
             [sel, second[gnn_assign(ti[second], dj[second], gain[second], len(tracks), scan.size)]]
@@ -1006,11 +1011,12 @@ def _with_range_rates(
     and their log-likelihoods grown by the range-rate's likelihood ratio against a false
     alarm's, uniform within ``±initiation.max_speed``: ``ln Λ + ln(2 v_max)``.
 
-    A range-rate outside its gate (``ν²/S > γ₁`` of the pair's combined estimate, one degree
-    of freedom, ``gating.gate_probability``) is not used: the pair keeps its position-only
-    update, so a sensor whose Doppler is aliased, missing (reported as 0) or of the wrong sign
-    loses nothing against one that sends none. Nor is one where the track is within
-    :data:`~trackers.models.measurement.MIN_RANGE` of the sensor."""
+    A range-rate outside its gate in every mode (``ν_j²/S_j > γ₁``, one degree of freedom,
+    ``gating.gate_probability``) is not used: the pair keeps its position-only update, so a
+    sensor whose Doppler is aliased or of the wrong sign loses nothing against one that sends
+    none. One inside the gate of some mode updates every mode, and the mode probabilities
+    with it (a turn's onset shows first in the range-rate). Nor is one used where the track is
+    within :data:`~trackers.models.measurement.MIN_RANGE` of the sensor."""
     if scan.range_rate is None or scan.sensor_position is None or det.size == 0:
         return x, P, mu, loglik
     rdot = np.take(scan.range_rate, det)
@@ -1019,10 +1025,14 @@ def _with_range_rates(
         return x, P, mu, loglik
     sensor = np.asarray(scan.sensor_position, dtype=float)
     variance = config.measurement.range_rate_std**2
-    xc, Pc = imm_combine(x[have], P[have], mu[have])
-    nu, S = range_rate_innovation(xc, Pc, rdot[have], sensor, variance)
-    far = np.hypot(xc[:, 0] - sensor[0], xc[:, 1] - sensor[1]) >= MIN_RANGE
-    have = have[(nu * nu <= config.gating.threshold_1d * S) & far]
+    K, M, n = x[have].shape
+    xm = x[have].reshape(K * M, n)
+    nu, S = range_rate_innovation(
+        xm, P[have].reshape(K * M, n, n), np.repeat(rdot[have], M), sensor, variance
+    )
+    inside = (nu * nu <= config.gating.threshold_1d * S).reshape(K, M).any(axis=1)
+    far = (np.hypot(xm[:, 0] - sensor[0], xm[:, 1] - sensor[1]) >= MIN_RANGE).reshape(K, M)
+    have = have[inside & far.all(axis=1)]
     if have.size == 0:
         return x, P, mu, loglik
     x, P, mu, loglik = x.copy(), P.copy(), mu.copy(), loglik.copy()

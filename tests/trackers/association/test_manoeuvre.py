@@ -66,9 +66,12 @@ def test_search_takes_nothing_along_the_track_in_dense_clutter_or_when_slow():
     assert _search(5.0, [[0.0, 140.0]], 1e-9) is None  # 5 m/s cannot turn 140 m in 4 s
 
 
-def _turning_target_ids(a_max):
+def _turning_target_ids(a_max, range_rates=False, velocity_errors=None):
     """A 250 m/s target seen every 4 s turns at 0.12 rad/s (3 g) from scan 11; scan 12 is
-    missed. The ids of the confirmed tracks from scan 8 on."""
+    missed. The ids of the confirmed tracks from scan 8 on. With ``range_rates``, each
+    detection has its range-rate from a sensor 20 km south (1 m/s noise); the velocity errors
+    of the confirmed tracks go into ``velocity_errors`` by scan."""
+    sensor = np.array([0.0, -20e3])
     tracker = IndividualTracker(
         TrackerConfig().merged(
             {
@@ -92,9 +95,20 @@ def _turning_target_ids(a_max):
             else:
                 p = p + 1000.0 * np.array([np.cos(heading), np.sin(heading)])
         z = np.zeros((0, 2)) if k == 12 else (p + rng.normal(0, sigma, 2))[None]
-        result = tracker.step(Scan("r", 4.0 * k, z, np.tile(sigma**2 * np.eye(2), (len(z), 1, 1))))
+        v = 250.0 * np.array([np.cos(heading), np.sin(heading)])
+        extra = {}
+        if range_rates:
+            rdot = (p - sensor) @ v / np.hypot(*(p - sensor)) + rng.normal(0.0, 1.0, len(z))
+            extra = {"sensor_position": sensor, "range_rate": rdot}
+        result = tracker.step(
+            Scan("r", 4.0 * k, z, np.tile(sigma**2 * np.eye(2), (len(z), 1, 1)), **extra)
+        )
         if k >= 8:
             ids.append(tuple(t.id for t in result.confirmed()))
+        if velocity_errors is not None:
+            velocity_errors[k] = [
+                float(np.hypot(*(np.array(t.velocity) - v))) for t in result.confirmed()
+            ]
     return ids
 
 
@@ -102,3 +116,13 @@ def test_a_track_follows_its_target_into_a_turn_through_a_missed_detection():
     assert set(_turning_target_ids(50.0)) == {("T1",)}
     without = _turning_target_ids(0.0)
     assert ("T1",) in without and () in without  # lost without the search
+
+
+def test_the_range_rate_of_a_detection_found_by_the_search_updates_the_track():
+    """Scan 13, after the missed scan 12 in the turn, is the search's: with range-rates the
+    track's velocity there is nearer the truth."""
+    plain: dict = {}
+    doppler: dict = {}
+    assert set(_turning_target_ids(50.0, velocity_errors=plain)) == {("T1",)}
+    assert set(_turning_target_ids(50.0, True, velocity_errors=doppler)) == {("T1",)}
+    assert doppler[13][0] < 0.7 * plain[13][0], (doppler[13], plain[13])
