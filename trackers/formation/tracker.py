@@ -116,6 +116,22 @@ class Formation:
             object.__setattr__(self, "_combined", cached)
         return cached
 
+    def with_members(self, new: Formation) -> Formation:
+        """The formation with ``new``'s members after its own (their states, scores, ...)."""
+        return replace(
+            self,
+            members=self.members + new.members,
+            x=np.concatenate([self.x, new.x]),
+            P=np.concatenate([self.P, new.P]),
+            mu=np.concatenate([self.mu, new.mu]),
+            score=np.concatenate([self.score, new.score]),
+            hits=np.concatenate([self.hits, new.hits]),
+            created=np.concatenate([self.created, new.created]),
+            updated=np.concatenate([self.updated, new.updated]),
+            leaving=np.concatenate([self.leaving, new.leaving]),
+            detection_ids=self.detection_ids + new.detection_ids,
+        )
+
     def take(self, keep: np.ndarray) -> Formation:
         """The formation with only the members where ``keep`` is true."""
         idx = np.flatnonzero(keep)
@@ -157,9 +173,12 @@ class _State:
 
 def _member_sojourn_times(config: TrackerConfig) -> tuple[float, ...]:
     """``motion.sojourn_times`` with the constant-velocity mode's ``formation.cv_sojourn_time``."""
-    motion = config.motion
+    return _sojourn_times_of(config.motion, config.formation)
+
+
+def _sojourn_times_of(motion: MotionConfig, formation: FormationConfig) -> tuple[float, ...]:
     return tuple(
-        config.formation.cv_sojourn_time if name == "cv" else tau
+        formation.cv_sojourn_time if name == "cv" else tau
         for name, tau in zip(motion.models, motion.sojourn_times, strict=True)
     )
 
@@ -167,12 +186,15 @@ def _member_sojourn_times(config: TrackerConfig) -> tuple[float, ...]:
 def member_motion(config: TrackerConfig) -> MotionConfig:
     """The members' IMM: the modes of ``motion``, the constant-velocity mode with the
     formation's ``q_cv``, ``cv_sojourn_time`` and ``cv_turn_rate_std``."""
-    f = config.formation
+    return _member_motion_of(config.motion, config.formation)
+
+
+def _member_motion_of(motion: MotionConfig, formation: FormationConfig) -> MotionConfig:
     return replace(
-        config.motion,
-        q_cv=f.q_cv,
-        sojourn_times=_member_sojourn_times(config),
-        cv_turn_rate_std=f.cv_turn_rate_std,
+        motion,
+        q_cv=formation.q_cv,
+        sojourn_times=_sojourn_times_of(motion, formation),
+        cv_turn_rate_std=formation.cv_turn_rate_std,
     )
 
 
@@ -185,7 +207,7 @@ def _models(config: TrackerConfig) -> tuple[ConstantVelocity | CoordinatedTurn, 
 def _models_of(
     motion: MotionConfig, formation: FormationConfig
 ) -> tuple[ConstantVelocity | CoordinatedTurn, ...]:
-    return build_models(member_motion(TrackerConfig(motion=motion, formation=formation)))
+    return build_models(_member_motion_of(motion, formation))
 
 
 def _new_formation(
@@ -218,20 +240,7 @@ def _new_formation(
 def _joined(f: Formation, rows: Sequence[int], view: PointTrackView, config: TrackerConfig):
     """``f`` with the view's tracks ``rows`` as new members, started as in
     :func:`_new_formation`."""
-    new = _new_formation(f.id, rows, view, config)
-    return replace(
-        f,
-        members=f.members + new.members,
-        x=np.concatenate([f.x, new.x]),
-        P=np.concatenate([f.P, new.P]),
-        mu=np.concatenate([f.mu, new.mu]),
-        score=np.concatenate([f.score, new.score]),
-        hits=np.concatenate([f.hits, new.hits]),
-        created=np.concatenate([f.created, new.created]),
-        updated=np.concatenate([f.updated, new.updated]),
-        leaving=np.concatenate([f.leaving, new.leaving]),
-        detection_ids=f.detection_ids + new.detection_ids,
-    )
+    return f.with_members(_new_formation(f.id, rows, view, config))
 
 
 def _joining(
