@@ -64,16 +64,29 @@ def range_rate_jacobian(x: np.ndarray, sensor: np.ndarray) -> np.ndarray:
     return J
 
 
+def _innovation_terms(
+    x: np.ndarray, P: np.ndarray, rdot: np.ndarray, sensor: np.ndarray, variance: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """``J``, ``P Jᵀ``, ``S = J P Jᵀ + σ_ṙ²`` and ``ν = ṙ − h(x)``."""
+    J = range_rate_jacobian(x, sensor)
+    PJ = np.einsum("kij,kj->ki", P, J)
+    S = np.einsum("ki,ki->k", J, PJ) + float(variance)
+    return J, PJ, S, rdot - range_rate(x, sensor)
+
+
 def range_rate_innovation(
     x: np.ndarray, P: np.ndarray, rdot: np.ndarray, sensor: np.ndarray, variance: float
 ) -> tuple[np.ndarray, np.ndarray]:
     """``ν = ṙ − h(x)`` and ``S = J P Jᵀ + σ_ṙ²`` of states ``x (K, n)``, ``P (K, n, n)``: the
     range-rate innovation and its variance, for gating (``ν²/S ≤ γ₁``)."""
-    x = np.asarray(x, dtype=float)
-    sensor = np.asarray(sensor, dtype=float).reshape(2)
-    J = range_rate_jacobian(x, sensor)
-    S = np.einsum("ki,kij,kj->k", J, np.asarray(P, dtype=float), J) + float(variance)
-    return np.asarray(rdot, dtype=float) - range_rate(x, sensor), S
+    _, _, S, nu = _innovation_terms(
+        np.asarray(x, dtype=float),
+        np.asarray(P, dtype=float),
+        np.asarray(rdot, dtype=float),
+        np.asarray(sensor, dtype=float).reshape(2),
+        variance,
+    )
+    return nu, S
 
 
 def range_rate_update(
@@ -92,10 +105,7 @@ def range_rate_update(
     P = np.asarray(P, dtype=float)
     rdot = np.asarray(rdot, dtype=float)
     sensor = np.asarray(sensor, dtype=float).reshape(2)
-    J = range_rate_jacobian(x, sensor)
-    PJ = np.einsum("kij,kj->ki", P, J)  # P Jᵀ
-    S = np.einsum("ki,ki->k", J, PJ) + float(variance)
-    nu = rdot - range_rate(x, sensor)
+    J, PJ, S, nu = _innovation_terms(x, P, rdot, sensor, variance)
     gain = PJ / S[:, None]
     x_new = x + gain * nu[:, None]
     n = x.shape[1]
