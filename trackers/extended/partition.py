@@ -19,7 +19,9 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 __all__ = [
+    "close_pairs",
     "component_labels",
+    "edge_groups",
     "nested_unions",
     "pair_subsets",
     "point_subsets",
@@ -50,16 +52,22 @@ def resolution_subsets(Z: np.ndarray, d_res: float, min_size: int = 1) -> list[n
         return []
     if n == 1:
         return [np.zeros(1, dtype=np.intp)]
+    i, j = close_pairs(Z, d_res)
+    return pair_subsets(n, i, j, min_size)
+
+
+def close_pairs(Z: np.ndarray, d_res: float) -> tuple[np.ndarray, np.ndarray]:
+    """The pairs ``i < j`` of rows of the ``(n, 2)`` points ``Z`` with ``‖zᵢ − zⱼ‖ ≤ d_res``,
+    as two index arrays: every pair's distance for a few points, a k-d tree for more."""
+    n = Z.shape[0]
     if n <= BRUTE_FORCE_POINTS:  # every pair: cheaper than a k-d tree for a few points
         x, y = Z[:, 0], Z[:, 1]  # (columns: numpy reduces a length-2 axis slowly)
         dx, dy = x[:, None] - x[None, :], y[:, None] - y[None, :]
         i, j = np.nonzero(dx * dx + dy * dy <= float(d_res) ** 2)
         upper = i < j
-        i, j = i[upper], j[upper]
-    else:
-        pairs = cKDTree(Z).query_pairs(r=float(d_res), output_type="ndarray")
-        i, j = pairs[:, 0], pairs[:, 1]
-    return pair_subsets(n, i, j, min_size)
+        return i[upper], j[upper]
+    pairs = cKDTree(Z).query_pairs(r=float(d_res), output_type="ndarray")
+    return pairs[:, 0], pairs[:, 1]
 
 
 def pair_subsets(n: int, i: np.ndarray, j: np.ndarray, min_size: int = 1) -> list[np.ndarray]:
@@ -70,16 +78,13 @@ def pair_subsets(n: int, i: np.ndarray, j: np.ndarray, min_size: int = 1) -> lis
     if n == 0 or n < min_size:
         return []
     if len(i) <= UNION_FIND_EDGES and (min_size > 1 or n <= BRUTE_FORCE_POINTS):
-        # A few edges: union-find over the nodes they touch, grouped in plain Python. With
-        # min_size > 1 an untouched node (a component of one) is never wanted.
-        roots = _roots(i.tolist(), j.tolist())
-        groups: dict[int, list[int]] = {}
+        # A few edges: grouped in plain Python. With min_size > 1 a node without an edge (a
+        # component of one) is never wanted.
+        groups = edge_groups(i.tolist(), j.tolist())
         if min_size > 1:
-            for a, r in roots.items():
-                groups.setdefault(r, []).append(a)
-            big = sorted(sorted(g) for g in groups.values() if len(g) >= min_size)
+            big = sorted(sorted(g) for g in groups if len(g) >= min_size)
             return [np.array(g, dtype=np.intp) for g in big]
-        return [np.array(g, dtype=np.intp) for g in _components(n, roots)]
+        return [np.array(g, dtype=np.intp) for g in _components(n, groups)]
     labels = component_labels(n, i, j)
     counts = np.bincount(labels, minlength=n)
     if min_size > 1:
@@ -88,6 +93,41 @@ def pair_subsets(n: int, i: np.ndarray, j: np.ndarray, min_size: int = 1) -> lis
     order = np.argsort(labels, kind="stable").astype(np.intp)
     ends = np.cumsum(counts[counts > 0]).tolist()
     return [order[a:b] for a, b in zip([0, *ends[:-1]], ends, strict=True)]
+
+
+def edge_groups(i: list[int], j: list[int]) -> list[list[int]]:
+    """The connected components of the graph with edges ``(iₖ, jₖ)`` that have an edge, each
+    a list of its nodes in no particular order: every node points at its component's list,
+    and an edge between two components moves the smaller list's nodes into the larger (each
+    node moves at most ``log₂ n`` times). A plain loop without calls: for the few hundred
+    edges of a scan, several times faster than a union-find of nested root searches. A loop
+    ``(a, a)`` joins nothing."""
+    group: dict[int, list[int]] = {}
+    made: list[list[int]] = []
+    for a, b in zip(i, j, strict=True):
+        if a == b:  # a loop joins nothing
+            continue
+        ga = group.get(a)
+        gb = group.get(b)
+        if ga is None:
+            if gb is None:
+                g = [a, b]
+                group[a] = g
+                group[b] = g
+                made.append(g)
+            else:
+                gb.append(a)
+                group[a] = gb
+        elif gb is None:
+            ga.append(b)
+            group[b] = ga
+        elif ga is not gb:
+            if len(ga) < len(gb):
+                ga, gb = gb, ga
+            ga.extend(gb)
+            for c in gb:
+                group[c] = ga
+    return [g for g in made if group[g[0]] is g]  # those not merged into another
 
 
 def component_labels(n: int, i: np.ndarray, j: np.ndarray) -> np.ndarray:
@@ -126,33 +166,12 @@ def nested_unions(subsets: list[np.ndarray], fit: np.ndarray) -> list[np.ndarray
 
 
 def _union_find_labels(n: int, i: np.ndarray, j: np.ndarray) -> np.ndarray:
-    """:func:`component_labels` by union-find (:func:`_roots`; a plain loop: faster than
-    array rounds for a few hundred edges). Nodes without an edge are their own label."""
+    """:func:`component_labels` by :func:`edge_groups` (a plain loop: faster than array
+    rounds for a few hundred edges). Nodes without an edge are their own label."""
     labels = np.arange(n, dtype=np.intp)
-    roots = _roots(i.tolist(), j.tolist())
-    if roots:
-        labels[list(roots)] = list(roots.values())
+    for g in edge_groups(i.tolist(), j.tolist()):
+        labels[g] = min(g)
     return labels
-
-
-def _roots(i: list[int], j: list[int]) -> dict[int, int]:
-    """Union-find with path halving over the edges ``(iₖ, jₖ)``, the smaller root kept: the
-    root of each node that has an edge, which is the smallest node of its component."""
-    parent = {a: a for a in i + j}
-
-    def root(a: int) -> int:
-        while parent[a] != a:
-            parent[a] = parent[parent[a]]
-            a = parent[a]
-        return a
-
-    for a, b in zip(i, j, strict=True):
-        ra, rb = root(a), root(b)
-        if ra < rb:
-            parent[rb] = ra
-        elif rb < ra:
-            parent[ra] = rb
-    return {a: root(a) for a in parent}
 
 
 def point_subsets(points: list[tuple[float, float]], d_res: float) -> list[list[int]]:
@@ -181,14 +200,18 @@ def point_subsets(points: list[tuple[float, float]], d_res: float) -> list[list[
             if dx * dx + dy * dy <= d2:
                 ei.append(a)
                 ej.append(b)
-    return _components(n, _roots(ei, ej))
+    return _components(n, edge_groups(ei, ej))
 
 
-def _components(n: int, roots: dict[int, int]) -> list[list[int]]:
-    """The nodes ``0 … n − 1`` grouped by their ``roots`` (:func:`_roots`; a node without an
-    edge is alone), ascending within a group; a component's root is its smallest node, so
-    the groups come in order of it."""
-    groups: dict[int, list[int]] = {}
+def _components(n: int, groups: list[list[int]]) -> list[list[int]]:
+    """The nodes ``0 … n − 1`` grouped as ``groups`` (:func:`edge_groups`; a node in none is
+    alone), ascending within a group, the groups in order of their smallest node."""
+    first = list(range(n))  # each node's group's smallest node
+    for g in groups:
+        m = min(g)
+        for a in g:
+            first[a] = m
+    out: dict[int, list[int]] = {}
     for a in range(n):
-        groups.setdefault(roots.get(a, a), []).append(a)
-    return list(groups.values())
+        out.setdefault(first[a], []).append(a)
+    return list(out.values())

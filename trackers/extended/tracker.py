@@ -43,6 +43,7 @@ import math
 from collections.abc import Callable
 from dataclasses import dataclass, replace
 from functools import cached_property
+from typing import NamedTuple
 
 import numpy as np
 from scipy.spatial import cKDTree
@@ -50,7 +51,13 @@ from scipy.spatial import cKDTree
 from trackers.association.gating import max_eigenvalue_2x2
 from trackers.association.spatial import pairs_within
 from trackers.config import ExtendedConfig, TrackerConfig, TrackManagementConfig
-from trackers.extended.partition import pair_subsets, point_subsets, resolution_subsets
+from trackers.extended.partition import (
+    UNION_FIND_EDGES,
+    close_pairs,
+    edge_groups,
+    pair_subsets,
+    point_subsets,
+)
 from trackers.extended.random_matrix import (
     ExtendedEstimate,
     Moments,
@@ -125,12 +132,11 @@ class ExtendedTrack:
     visitors: frozenset[str] = frozenset()
 
 
-@dataclass(frozen=True, eq=False)
-class _Candidate:
+class _Candidate(NamedTuple):
     """A cluster seen in consecutive scans, not yet a track: its latest centroid, and the
     sums for the least-squares line ``c(t) = a + v (t − t₀)`` through its centroids (a
     cluster of clutter jitters by tens of metres a scan: a velocity from two centroids would
-    be off by tens of m/s). Plain floats: a scan handles many of these."""
+    be off by tens of m/s). A tuple of plain floats: a scan makes and drops many of these."""
 
     centroid: tuple[float, float]
     first_time: float
@@ -154,11 +160,15 @@ class _Candidate:
     @property
     def velocity(self) -> np.ndarray:
         """The line's slope ``v = (n Στc − Στ Σc) / (n Στ² − (Στ)²)`` (0 for one centroid)."""
+        return np.array(self.slope())
+
+    def slope(self) -> tuple[float, float]:
+        """:attr:`velocity` as two floats."""
         n, s1, s2, sx, sy, tx, ty = self.sums
         den = n * s2 - s1 * s1
         if n < 2 or den <= 0:
-            return np.zeros(2)
-        return np.array([(n * tx - s1 * sx) / den, (n * ty - s1 * sy) / den])
+            return 0.0, 0.0
+        return (n * tx - s1 * sx) / den, (n * ty - s1 * sy) / den
 
     def velocity_std(self, centroid_std: float) -> float:
         """Standard deviation of the slope for centroids uncertain by ``centroid_std`` (m):
@@ -170,7 +180,7 @@ class _Candidate:
     def predicted(self, t: float) -> tuple[float, float]:
         """The line's centroid at ``t``: ``Σc/n + v (t − t₀ − Στ/n)``."""
         n, s1, _, sx, sy, _, _ = self.sums
-        vx, vy = self.velocity
+        vx, vy = self.slope()
         lag = t - self.first_time - s1 / n
         return sx / n + vx * lag, sy / n + vy * lag
 
@@ -340,15 +350,14 @@ class _PointGates:
         centre: tuple[float, float],
         reach: float,
         ve: tuple[float, float],
-        Pve_trace: float,
         spread: float,
     ) -> set[int]:
         """What the confirmed tracks not moving with an extended track would take of its
         detections ``rows`` (ascending, all within ``reach`` of ``centre``; ``points`` as
         :func:`_points` gives them): for each track whose velocity is more than ``spread``
-        (m/s) from ``ve`` (:func:`_moves_with` with no allowance for uncertainty; ``Pve_trace``
-        the trace of ``ve``'s covariance), the detection nearest to it in its gate
-        (Mahalanobis; of equally near ones the first), if any. Only the tracks whose gate can
+        (m/s) from ``ve`` (:func:`_moves_with` with no allowance for uncertainty), the
+        detection nearest to it in its gate (Mahalanobis; of equally near ones the first), if
+        any. Only the tracks whose gate can
         reach that far are looked at (``d² ≤ χ² λ_max(Pp + R) ≤ χ² (tr Pp + tr R)``), on
         floats, operation for operation as the array formulas."""
         if not (rows and self.rows.size):
@@ -365,8 +374,7 @@ class _PointGates:
         gate = np.take(gate, ks).tolist()
         out: set[int] = set()
         for (x0, x1, vx, vy), p, g in zip(x, P, gate, strict=True):
-            sd = math.sqrt(0.5 * ((p[10] + p[15]) + Pve_trace))
-            if _hypot(vx - ve[0], vy - ve[1]) <= spread + 0.0 * sd:
+            if _hypot(vx - ve[0], vy - ve[1]) <= spread:
                 continue  # moves with it
             pa, pb, pc = p[0], p[1], p[5]
             best, best_m = -1, POINT_GATE
@@ -631,30 +639,31 @@ class ExtendedTracker:
         scan's detections closer than the resolution distance (from the k-d tree the tracks
         used), if known."""
         cfg, tm = state.config, state.management
-        if pairs is None:
-            free = np.flatnonzero(~claimed)
-            clusters = [
-                free[s]
-                for s in resolution_subsets(
-                    np.take(scan.z, free, axis=0), cfg.resolution_distance, cfg.min_detections
-                )
-            ]
-        else:  # the same subsets (min_detections ≥ 2) from the pairs of free detections
-            free = ~claimed
+        free = ~claimed
+        if pairs is None and not claimed.any():
+            i, j = close_pairs(scan.z, cfg.resolution_distance)
+        elif pairs is None:
+            rows = np.flatnonzero(free)
+            i, j = close_pairs(np.take(scan.z, rows, axis=0), cfg.resolution_distance)
+            i, j = np.take(rows, i), np.take(rows, j)
+        else:  # the pairs of free detections among them
             i, j = pairs[:, 0], pairs[:, 1]
             both = np.flatnonzero(free[i] & free[j])
-            clusters = pair_subsets(
-                scan.size, np.take(i, both), np.take(j, both), max(2, cfg.min_detections)
-            )
-        if clusters:  # centroids in one pass: (Σ z over each cluster) / its size
-            sizes = np.array([r.size for r in clusters])
-            starts = np.cumsum(sizes) - sizes
-            zc = np.add.reduceat(np.take(scan.z, np.concatenate(clusters), axis=0), starts)
-            centroids = [
-                (x / k, y / k) for (x, y), k in zip(zc.tolist(), sizes.tolist(), strict=True)
-            ]
+            i, j = np.take(i, both), np.take(j, both)
+        # The clusters: the subsets of at least min_detections (≥ 2) free detections, as
+        # sorted row lists in order of their first row; their centroids in plain floats.
+        least = max(2, cfg.min_detections)
+        if len(i) <= UNION_FIND_EDGES:
+            groups = edge_groups(i.tolist(), j.tolist())
+            clusters = sorted(sorted(g) for g in groups if len(g) >= least)
         else:
-            centroids = []
+            clusters = [s.tolist() for s in pair_subsets(scan.size, i, j, least)]
+        centroids: list[tuple[float, float]] = []
+        if clusters:
+            zx, zy = scan.z[:, 0].tolist(), scan.z[:, 1].tolist()
+            for rows in clusters:
+                k = len(rows)
+                centroids.append((sum(zx[r] for r in rows) / k, sum(zy[r] for r in rows) / k))
         # Each cluster's run: the candidate it continues (nearest to its prediction).
         match: list[_Candidate | None] = [None] * len(clusters)
         candidates: list[_Candidate] = []
@@ -682,10 +691,10 @@ class ExtendedTracker:
             centroid = centroids[k]
             cand = match[k]
             run = None if cand is None else cand.seen_again(centroid, t)
-            if run is None or np.hypot(*run.velocity) > cfg.max_speed:
+            if run is None or math.hypot(*run.slope()) > cfg.max_speed:
                 candidates.append(_Candidate.first(centroid, t))
             elif run.seen >= cfg.birth_scans and t - run.first_time >= BIRTH_MIN_SPAN:
-                ripe.append((rows, run))
+                ripe.append((np.array(rows, dtype=np.intp), run))
             else:
                 candidates.append(run)
         if not ripe:
@@ -795,9 +804,8 @@ def _gated_subsets(
         return [], {}, None
     points = _points(scan, near)
     rows = near.tolist()
-    (pa, _), (_, pc) = est.P[2:4, 2:4].tolist()
     theirs = point_gates().theirs(
-        sorted(rows), points, (c0, c1), reach, (v0, v1), pa + pc, cfg.group_speed_spread
+        sorted(rows), points, (c0, c1), reach, (v0, v1), cfg.group_speed_spread
     )
     if theirs:
         rows = [r for r in rows if r not in theirs]

@@ -62,6 +62,7 @@ def test_component_labels_are_each_components_smallest_node(n_edges):
     rng = np.random.default_rng(n_edges)
     n = 4000
     i, j = rng.integers(0, n, n_edges), rng.integers(0, n, n_edges)
+    i, j = np.r_[i, i[:5], 7, 7], np.r_[j, j[:5], 7, 8]  # repeated edges and a loop
     labels = component_labels(n, i, j)
     got = sorted(tuple(np.flatnonzero(labels == k).tolist()) for k in set(labels.tolist()))
     assert got == _components_by_scipy(n, i, j)
