@@ -213,11 +213,9 @@ def match_template(
     dist = np.hypot(zhat[:, None, 0] - Z[None, :, 0], zhat[:, None, 1] - Z[None, :, 1])  # (N, K)
     if miss_cost is not None:
         near &= (dist <= miss_cost)[None]
+        return _least_exclusive(near, dist, float(miss_cost), placements, b0, mu, lo_a)
     d = np.where(near, dist[None], np.inf).min(axis=2)  # (Q, N)
-    if miss_cost is None:
-        cost = np.where(np.isfinite(d), d, 0.0).sum(axis=1)
-    else:
-        cost = np.minimum(d, miss_cost).sum(axis=1)
+    cost = np.where(np.isfinite(d), d, 0.0).sum(axis=1)
     q = int(np.argmin(cost))
     mask = near[q]
     if not mask.any():
@@ -229,4 +227,51 @@ def match_template(
     shift = b0 + placements[q] * mu - lo_a
     return TemplateMatch(
         count=int(ok.sum()), cost=float(cost[q]), shift=shift, assignment=assignment
+    )
+
+
+def _least_exclusive(
+    near: np.ndarray,
+    dist: np.ndarray,
+    miss_cost: float,
+    placements: np.ndarray,
+    b0: np.ndarray,
+    mu: np.ndarray,
+    lo_a: np.ndarray,
+) -> TemplateMatch | None:
+    """The placement of least cost when each detection serves one template point: for
+    placement ``q`` the least ``Σ_n c_n`` over one-to-one assignments of points to the
+    detections ``near[q] (N, K)`` (``c_n = dist[n, k]``, or ``miss_cost`` for a point left
+    without), by the Hungarian method on the points against the detections and ``N`` misses.
+
+    Each placement's cost without the one-to-one rule, ``Σ_n min(min_k d_nk, miss_cost)``, is
+    a lower bound of its cost with it; the placements are tried in order of that bound and
+    the search stops once the bound reaches the best cost found. Without the rule, two points
+    could both count one detection, and a placement that slides a line formation one member
+    along (its end member missed) would cost as little as the true one."""
+    N, K = dist.shape
+    d = np.where(near, dist[None], np.inf).min(axis=2)  # (Q, N)
+    bound = np.minimum(d, miss_cost).sum(axis=1)
+    best: tuple[float, int, np.ndarray] | None = None
+    misses = np.full((N, N), miss_cost)
+    for q in np.argsort(bound, kind="stable").tolist():
+        if best is not None and bound[q] >= best[0]:
+            break
+        if not near[q].any():
+            continue
+        table = np.hstack([np.where(near[q], dist, miss_cost), misses])
+        rows, cols = linear_sum_assignment(table)
+        cost = float(table[rows, cols].sum())
+        if best is None or cost < best[0]:
+            real = cols < K
+            real[real] = near[q][rows[real], cols[real]]
+            chosen = np.full(N, -1, dtype=np.int64)
+            chosen[rows[real]] = cols[real]
+            best = (cost, q, chosen)
+    if best is None:
+        return None
+    cost, q, assignment = best
+    shift = b0 + placements[q] * mu - lo_a
+    return TemplateMatch(
+        count=int((assignment >= 0).sum()), cost=cost, shift=shift, assignment=assignment
     )

@@ -85,6 +85,26 @@ def test_a_false_alarm_completing_a_shifted_pattern_loses_with_a_miss_cost() -> 
     assert weighed.assignment.tolist() == [-1, 0, 1, 2]
 
 
+def test_one_detection_serves_one_member_in_the_placement_cost() -> None:
+    # A turning formation in its own frame (environment 3, seed 8, batch 131): the members'
+    # predictions lag, the first member (top) is missed, and cells of 150 m let the first
+    # two members both see the second member's detection B0. Counted for both, B0 made a
+    # placement that gives it to the first member (255 m off) as cheap as the true one; one
+    # to one, the second member (79 m off) takes it.
+    template = np.array([[-92.5, 455.0], [-33.6, 207.4], [112.8, -462.0], [13.3, -200.4]])
+    Z = np.array([[38.0, 235.1], [56.8, -395.3], [2.7, -93.9], [705.4, 313.4], [-437.8, 452.1]])
+    m = match_template(
+        template,
+        Z,
+        np.array([146.4, 168.9]),
+        max_shift=np.array([256.0, 239.9]),
+        miss_cost=263.9,
+    )
+    assert m is not None and m.assignment.tolist() == [-1, 0, 1, 2]
+    dist = np.hypot(*(Z[[0, 1, 2]] - template[[1, 2, 3]]).T)
+    assert m.cost == pytest.approx(263.9 + dist.sum())  # the miss, and each detection once
+
+
 def test_no_detection_or_no_template_is_no_match() -> None:
     assert match_template(np.zeros((0, 2)), np.ones((3, 2)), np.array([10.0, 10.0])) is None
     assert match_template(np.ones((3, 2)), np.zeros((0, 2)), np.array([10.0, 10.0])) is None
