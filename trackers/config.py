@@ -199,6 +199,13 @@ class InitiationConfig:
     ``candidate_max_age`` seconds and makes at most ``max_pairs_per_candidate`` tracks a scan
     (the likeliest), so the number of new tracks stays bounded in dense clutter.
 
+    Targets fly and drive in groups: a candidate that opens within ``group_radius`` of a
+    confirmed track at least ``group_min_speed`` fast adds a third component to its prior,
+    with probability ``group_fraction`` it moves with that track, ``N(v_track,
+    group_velocity_std²)`` per axis (the nearest such track). A member of a fast group then
+    starts with its group's velocity instead of a guess across the whole disc, and a pair
+    that joins it to a neighbour's detection is far less likely than its own.
+
     ``method`` ``"single_point"`` starts a tentative track at each free detection with zero
     velocity of std ``velocity_std`` per axis: it cannot start a target moving much faster than
     ``sqrt(γ) · velocity_std`` per second of revisit (γ the gate threshold).
@@ -227,6 +234,21 @@ class InitiationConfig:
     )
     max_pairs_per_candidate: int = _field(
         8, "most tracks one candidate starts in a scan (the likeliest)", ge=1, le=1000
+    )
+    group_fraction: float = _field(
+        0.5,
+        "prior probability that a new target near a fast confirmed track moves with it",
+        ge=0,
+        lt=1,
+    )
+    group_radius: float = _field(
+        1000.0, "how near a confirmed track a new target may move with it, m", gt=0, le=1e6
+    )
+    group_min_speed: float = _field(
+        30.0, "slowest confirmed track a new target may move with, m/s", ge=0, le=1e5
+    )
+    group_velocity_std: float = _field(
+        10.0, "velocity std per axis of a group's member about the group, m/s", gt=0, le=1e4
     )
 
     def __post_init__(self) -> None:

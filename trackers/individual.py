@@ -32,7 +32,8 @@ import numpy as np
 from trackers.association.gating import gate
 from trackers.association.gnn import gnn_assign
 from trackers.association.manoeuvre import ManoeuvreMatch, manoeuvre_search
-from trackers.config import TrackerConfig
+from trackers.association.spatial import pairs_within
+from trackers.config import InitiationConfig, TrackerConfig
 from trackers.filters.imm import (
     imm_combine,
     imm_predict,
@@ -329,7 +330,7 @@ class IndividualTracker:
 
         if config.initiation.method == "two_point":
             born, candidates = self._initiate_two_point(
-                scan, claims, config, pd_sensor, lam_fa, counters
+                scan, claims, config, pd_sensor, lam_fa, counters, tracks
             )
         else:
             born = self._initiate(scan, claims == -np.inf, config, lam_fa, counters)
@@ -468,6 +469,7 @@ class IndividualTracker:
         pd: float,
         lam_fa: float,
         counters: _Counters,
+        tracks: TrackArrays,
     ) -> tuple[TrackArrays, Candidates]:
         """Velocity-gated two-point initiation (:mod:`trackers.initiation`).
 
@@ -496,6 +498,8 @@ class IndividualTracker:
             pd=pd,
             clutter_density=lam_fa,
             min_score=np.maximum(claims, tm.delete_threshold),
+            group_fraction=init.group_fraction,
+            group_velocity_std=init.group_velocity_std,
         )
         born = _new_tracks(
             config,
@@ -525,6 +529,9 @@ class IndividualTracker:
             ),
             detection_ids=np.concatenate([cand.detection_ids[keep], fresh_ids]),
             origin=np.concatenate([cand.origin[keep], counters.origins(n)]),
+            group_velocity=np.concatenate(
+                [cand.group_velocity[keep], _group_velocities(scan.z[idx], tracks, init)]
+            ),
         )
         return born, candidates
 
@@ -635,6 +642,9 @@ class Checkpoint:
         for name in _CANDIDATE_NUMBERS:
             arrays[f"candidates.{name}"] = getattr(cand, name)
         _put_strings(arrays, "candidates.detection_ids", cand.detection_ids.tolist())
+        grouped = np.isfinite(cand.group_velocity[:, 0])
+        arrays["candidates.grouped"] = grouped
+        arrays["candidates.group_velocity"] = np.where(grouped[:, None], cand.group_velocity, 0.0)
         values = {
             "time": st.time,
             "next_id": st.next_id,
@@ -661,6 +671,17 @@ _TRACK_NUMBERS = (
     "origin",
 )
 _CANDIDATE_NUMBERS = ("z", "R", "time", "score", "origin")
+
+
+def _read_group_velocities(r: SectionReader, k: int) -> np.ndarray:
+    """The candidates' group velocities (NaN where none): none at all in a file written
+    before candidates had them."""
+    out = np.full((k, 2), np.nan)
+    if r.has("candidates.grouped"):
+        grouped = r.booleans("candidates.grouped", (k,))
+        v = r.floats("candidates.group_velocity", (k, 2))
+        out[grouped] = v[grouped]
+    return out
 
 
 def _put_strings(arrays: dict[str, np.ndarray], name: str, items: list[str | None]) -> None:
@@ -713,6 +734,7 @@ def _import(section: StateSection, config: TrackerConfig, id_prefix: str = "") -
         score=r.floats("candidates.score", (k,)),
         detection_ids=_objects(r.strings("candidates.detection_ids", k, optional=True)),
         origin=r.integers("candidates.origin", (k,), ge=0),
+        group_velocity=_read_group_velocities(r, k),
     )
     r.finish()
 
@@ -1042,6 +1064,34 @@ def _with_range_rates(
     x[have], P[have], mu[have] = xh, Ph, muh
     loglik[have] += dll + math.log(2.0 * config.initiation.max_speed)
     return x, P, mu, loglik
+
+
+def _group_velocities(z: np.ndarray, tracks: TrackArrays, init: InitiationConfig) -> np.ndarray:
+    """For each detection ``z (n, 2)`` that opens a candidate, the velocity of the nearest
+    confirmed track within ``init.group_radius`` that is at least ``init.group_min_speed``
+    fast (and no faster than ``init.max_speed``), ``(n, 2)``; NaN where there is none (or
+    ``init.group_fraction`` is 0)."""
+    out = np.full((z.shape[0], 2), np.nan)
+    if init.group_fraction <= 0.0 or z.shape[0] == 0 or len(tracks) == 0:
+        return out
+    v = tracks.x_comb[:, 2:4]
+    speed = np.hypot(v[:, 0], v[:, 1])
+    rows = np.flatnonzero(
+        tracks.confirmed & (speed >= init.group_min_speed) & (speed <= init.max_speed)
+    )
+    if rows.size == 0:
+        return out
+    p = np.take(tracks.x_comb[:, :2], rows, axis=0)
+    j, k = pairs_within(z, np.full(z.shape[0], init.group_radius), p)
+    if j.size == 0:
+        return out
+    d2 = np.sum((np.take(p, k, axis=0) - np.take(z, j, axis=0)) ** 2, axis=1)
+    order = np.lexsort((d2, j))  # by detection, nearest first
+    j, k = j[order], k[order]
+    first = np.ones(j.size, dtype=bool)
+    first[1:] = j[1:] != j[:-1]
+    out[j[first]] = np.take(v, np.take(rows, k[first]), axis=0)
+    return out
 
 
 def _missed_branch(time: np.ndarray, score: np.ndarray, t: float, miss: float) -> np.ndarray:

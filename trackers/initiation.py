@@ -78,8 +78,9 @@ PAIR_PRUNE_LOG_RATIO = math.log(100.0)
 class Candidates(RowArrays):
     """Detections waiting for a second one: ``z (n, 2)``, ``R (n, 2, 2)``, ``time (n,)``,
     ``score (n,)`` (the LLR of a track holding this one detection, misses included),
-    ``detection_ids (n,)`` (objects) and ``origin (n,)``, a number unique to each candidate
-    that the tracks it starts inherit."""
+    ``detection_ids (n,)`` (objects), ``origin (n,)``, a number unique to each candidate
+    that the tracks it starts inherit, and ``group_velocity (n, 2)``, the velocity of the
+    fast confirmed track nearest to it when it opened (NaN: none within reach)."""
 
     z: np.ndarray
     R: np.ndarray
@@ -87,6 +88,7 @@ class Candidates(RowArrays):
     score: np.ndarray
     detection_ids: np.ndarray
     origin: np.ndarray
+    group_velocity: np.ndarray
 
     @staticmethod
     def empty() -> Candidates:
@@ -97,6 +99,7 @@ class Candidates(RowArrays):
             score=np.zeros(0),
             detection_ids=np.zeros(0, dtype=object),
             origin=np.zeros(0, dtype=np.int64),
+            group_velocity=np.zeros((0, 2)),
         )
 
 
@@ -123,10 +126,12 @@ def _no_pairs() -> TwoPointTracks:
 
 
 #: Rows of the tables of pairs (one column a pair): the displacement ``d = z_j − z_c``, the
-#: entries of ``R_c + R_j`` and of ``R_j``, the interval ``Δt``; then, filled by
-#: :func:`_score_pairs`, ``ln(w N(d; 0, S_s))``, ``ln((1 − w) g_f)``, ``ln g₂`` and the score.
+#: entries of ``R_c + R_j`` and of ``R_j``, the interval ``Δt``, the candidate's group
+#: velocity ``v_g`` (NaN: none); then, filled by :func:`_score_pairs`, ``ln(w_s N(d; 0, S_s))``,
+#: ``ln(w_f g_f)``, ``ln g₂``, the score and ``ln(w_g N(d − v_g Δt; 0, S_g))``.
 _D0, _D1, _S00, _S01, _S11, _J00, _J01, _J11, _DT, _LS, _LF, _LL, _SCORE = range(13)
-_ROWS = 13
+_G0, _G1, _LG = 13, 14, 15
+_ROWS = 16
 
 #: Rows of the table of the mixture in :func:`_mixture_state`: 0-3 the state, 4-13 the
 #: entries P00, P01, P11, P02, P03, P12, P13, P22, P33, P23; the row of each entry of ``P``
@@ -142,16 +147,26 @@ _NEG_HALF, _TINY, _NEG_INF = np.array(-0.5), np.array(1e-300), np.array(-np.inf)
 _PI, _TWO_PI, _LOG_2PI = np.array(math.pi), np.array(2.0 * math.pi), np.array(math.log(2 * math.pi))
 
 
-def _pair_table(d: np.ndarray, R_c: np.ndarray, R_j: np.ndarray, dt: np.ndarray) -> np.ndarray:
+def _pair_table(
+    d: np.ndarray,
+    R_c: np.ndarray,
+    R_j: np.ndarray,
+    dt: np.ndarray,
+    v_g: np.ndarray | None = None,
+) -> np.ndarray:
     """The table of k pairs (``_ROWS`` rows, one column a pair) with the rows of the inputs
     filled: the displacements ``d (k, 2)``, the entries of ``R_c + R_j`` and of ``R_j``
-    (``(k, 2, 2)`` each) and the intervals ``dt`` (``(k,)`` or a number)."""
+    (``(k, 2, 2)`` each), the intervals ``dt`` (``(k,)`` or a number) and the group
+    velocities ``v_g (k, 2)`` (NaN: none; ``None``: rows left unset, for a scoring without
+    the group component)."""
     T = np.empty((_ROWS, d.shape[0]))
     T[_D0 : _D1 + 1] = d.T
     R_sum = R_c + R_j
     T[_S00], T[_S01], T[_S11] = R_sum[:, 0, 0], R_sum[:, 0, 1], R_sum[:, 1, 1]
     T[_J00], T[_J01], T[_J11] = R_j[:, 0, 0], R_j[:, 0, 1], R_j[:, 1, 1]
     T[_DT] = dt
+    if v_g is not None:
+        T[_G0 : _G1 + 1] = v_g.T
     return T
 
 
@@ -164,16 +179,24 @@ def _score_pairs(
     slow_fraction: float,
     q: float,
     gamma: float,
+    group_fraction: float = 0.0,
+    group_velocity_std: float = 1.0,
 ) -> None:
-    """Fill the rows ``_LS``, ``_LF``, ``_LL`` and ``_SCORE`` of the table ``T`` of pairs:
-    ``a_s = ln(w N(d; 0, S_s))``, ``a_f = ln((1 − w) g_f)`` (module docstring),
-    ``ln g₂ = ln(e^{a_s} + e^{a_f})`` and the score ``base + ln g₂``, with ``base =
+    """Fill the rows ``_LS``, ``_LF``, ``_LL``, ``_SCORE`` and ``_LG`` of the table ``T`` of
+    pairs: ``a_s = ln(w_s N(d; 0, S_s))``, ``a_f = ln(w_f g_f)``, ``a_g = ln(w_g N(d − v_g Δt;
+    0, S_g))`` (module docstring; ``a_g = −∞`` for a candidate without a group velocity),
+    ``ln g₂ = ln(e^{a_s} + e^{a_f} + e^{a_g})`` and the score ``base + ln g₂``, with ``base =
     L_c + ln(P_D/λ_fa)`` (broadcasting to a row); the score is ``−∞`` where the pair fails
     the velocity gate (:func:`pair_candidates`). With ``s`` the entries of ``R_c + R_j``:
 
         S_s = R_c + R_j + α I,  α = σ_v² Δt² + q Δt³/3,
         ln N(d; 0, S_s) = −½ dᵀ S_s⁻¹ d − ln 2π − ½ ln |S_s|,
-        g_f = 1 / (π (v_max Δt)² + 2π |R_c + R_j|^½).
+        g_f = 1 / (π (v_max Δt)² + 2π |R_c + R_j|^½),
+        S_g = R_c + R_j + α_g I,  α_g = σ_g² Δt² + q Δt³/3,
+
+    and the weights ``w_s = w (1 − w_g)``, ``w_f = (1 − w) (1 − w_g)``, ``w_g`` for a candidate
+    with a group velocity, ``w``, ``1 − w`` and 0 for one without. With ``group_fraction`` 0
+    the group rows are neither read nor written (a table without group velocities).
     """
     d0, d1, s00, s01, s11, dt = T[_D0], T[_D1], T[_S00], T[_S01], T[_S11], T[_DT]
     q = np.array(q)
@@ -188,8 +211,26 @@ def _score_pairs(
     ll_f = -np.log(_PI * reach**2 + _TWO_PI * np.sqrt(det))
     a_s = np.add(np.array(math.log(slow_fraction)), ll_s, out=T[_LS])
     a_f = np.add(np.array(math.log1p(-slow_fraction)), ll_f, out=T[_LF])
-    top = np.maximum(a_s, a_f)
-    loglik = np.add(top, np.log(np.exp(a_s - top) + np.exp(a_f - top)), out=T[_LL])
+    if group_fraction <= 0.0:
+        top = np.maximum(a_s, a_f)
+        loglik = np.add(top, np.log(np.exp(a_s - top) + np.exp(a_f - top)), out=T[_LL])
+    else:
+        grouped = np.isfinite(T[_G0])
+        g0, g1 = np.where(grouped, T[_G0], 0.0), np.where(grouped, T[_G1], 0.0)
+        e0, e1 = d0 - g0 * dt, d1 - g1 * dt
+        alpha_g = np.array(group_velocity_std**2) * dt**2 + q * dt**3 / _THREE
+        u00, u11 = s00 + alpha_g, s11 + alpha_g
+        det_g = u00 * u11 - s01 * s01
+        m2_g = (u11 * e0 * e0 - _TWO * s01 * e0 * e1 + u00 * e1 * e1) / det_g
+        ll_g = _NEG_HALF * m2_g - _LOG_2PI - _HALF * np.log(det_g)
+        rest = np.where(grouped, math.log1p(-group_fraction), 0.0)
+        a_s += rest
+        a_f += rest
+        a_g = np.where(grouped, math.log(group_fraction) + ll_g, -np.inf)
+        T[_LG] = a_g
+        top = np.maximum(np.maximum(a_s, a_f), a_g)
+        total = np.exp(a_s - top) + np.exp(a_f - top) + np.exp(a_g - top)
+        loglik = np.add(top, np.log(total), out=T[_LL])
     score = np.add(base, loglik, out=T[_SCORE])
     rho = np.maximum(_ZERO, _ONE - reach / np.maximum(np.hypot(d0, d1), _TINY))
     m2 = (s11 * d0 * d0 - cross + s00 * d1 * d1) / det
@@ -207,6 +248,9 @@ def two_point_estimate(
     velocity_std: float,
     slow_fraction: float,
     q: float,
+    group_velocity: np.ndarray | None = None,
+    group_fraction: float = 0.0,
+    group_velocity_std: float = 1.0,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """State and likelihood of the tracks started by pairs ``(z_c, z_j)`` ``Δt`` apart.
 
@@ -214,13 +258,19 @@ def two_point_estimate(
     over ``[x, y, vx, vy]`` at the second detection (the moment-matched mixture
     ``x = Σ β_m x_m``, ``P = Σ β_m (P_m + (x_m − x)(x_m − x)ᵀ)``) and ``ln g₂ (k,)``,
 
-        g₂ = w N(d; 0, S_s) + (1 − w) / (π (v_max Δt)² + 2π |R_c + R_j|^½).
+        g₂ = w_s N(d; 0, S_s) + w_f / (π (v_max Δt)² + 2π |R_c + R_j|^½)
+             + w_g N(d − v_g Δt; 0, S_g),
+
+    the last term for the pairs given a ``group_velocity`` ``v_g`` (rows of NaN: none).
     """
     z_c = np.asarray(z_c, dtype=float).reshape(-1, 2)
     z_j = np.asarray(z_j, dtype=float).reshape(-1, 2)
     R_c = np.asarray(R_c, dtype=float).reshape(-1, 2, 2)
     R_j = np.asarray(R_j, dtype=float).reshape(-1, 2, 2)
-    T = _pair_table(z_j - z_c, R_c, R_j, dt)
+    v_g = None if group_velocity is None else np.asarray(group_velocity, float).reshape(-1, 2)
+    grouped = v_g is not None and group_fraction > 0.0 and bool(np.isfinite(v_g[:, 0]).any())
+    T = _pair_table(z_j - z_c, R_c, R_j, dt, v_g if grouped else None)
+    group = dict(group_fraction=group_fraction, group_velocity_std=group_velocity_std)
     _score_pairs(
         T,
         _ZERO,
@@ -229,17 +279,41 @@ def two_point_estimate(
         slow_fraction=slow_fraction,
         q=q,
         gamma=math.inf,
+        **(group if grouped else {}),
     )
     loglik = T[_LL].copy()
-    x, P = _mixture_state(
-        np.concatenate((T, T), axis=1), max_speed=max_speed, velocity_std=velocity_std, q=q
-    )
+    x, P = _mixed(T, max_speed, velocity_std, q, group_velocity_std if grouped else None)
     x[:, :2] += z_c
     return x, P, loglik
 
 
+def _mixed(
+    T: np.ndarray,
+    max_speed: float,
+    velocity_std: float,
+    q: float,
+    group_velocity_std: float | None,
+) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`_mixture_state` of the pairs of the scored table ``T`` (one column a pair):
+    of two components, or of three when the table was scored with group velocities
+    (``group_velocity_std`` given)."""
+    copies = (T, T) if group_velocity_std is None else (T, T, T)
+    return _mixture_state(
+        np.concatenate(copies, axis=1),
+        max_speed=max_speed,
+        velocity_std=velocity_std,
+        q=q,
+        group_velocity_std=group_velocity_std,
+    )
+
+
 def _mixture_state(
-    T: np.ndarray, *, max_speed: float, velocity_std: float, q: float
+    T: np.ndarray,
+    *,
+    max_speed: float,
+    velocity_std: float,
+    q: float,
+    group_velocity_std: float | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """The moment-matched mixture of the two components' Kalman posteriors of
     ``[p − z_c, v]`` at the second detection of each of the k pairs of the table ``T``
@@ -261,14 +335,26 @@ def _mixture_state(
     The mixture is ``x = β_s x_s + β_f x_f`` and
     ``P = β_s P_s + β_f P_f + β_s β_f δ δᵀ`` with ``δ = x_s − x_f``. Both components are
     computed at once, entry by entry, on the rows of ``T``; the state and the upper triangle
-    of ``P`` go into one table that is mixed in a few operations."""
-    k = T.shape[1] // 2
-    T[_LS, k:] = T[_LF, k:]  # the components' log weights a_s, a_f
+    of ``P`` go into one table that is mixed in a few operations.
+
+    With ``group_velocity_std`` given, ``T`` holds the pairs three times, the third the
+    *group* component: the prior ``v ~ N(v_g, σ_g² I)``, so ``z_c + v_g Δt`` predicted, which
+    is the update above with ``d − v_g Δt`` for ``d`` and ``v_g Δt``, ``v_g`` added to the
+    state; the mixture's spread is then ``Σ_m β_m (x_m − x)(x_m − x)ᵀ``."""
+    m = 2 if group_velocity_std is None else 3
+    k = T.shape[1] // m
+    T[_LS, k : 2 * k] = T[_LF, k : 2 * k]  # the components' log weights a_s, a_f (, a_g)
+    if m == 3:
+        T[_LS, 2 * k :] = T[_LG, 2 * k :]
+        g = np.nan_to_num(T[_G0 : _G1 + 1, 2 * k :])  # (2, k); no group: weight 0
+        T[_D0 : _D1 + 1, 2 * k :] -= g * T[_DT, 2 * k :]
     d0, d1, j00, j01, j11, dt = T[_D0], T[_D1], T[_J00], T[_J01], T[_J11], T[_DT]
     q = np.array(q)
     beta = np.exp(T[_LS] - T[_LL])
-    var = np.empty(2 * k)
-    var[:k], var[k:] = velocity_std**2, 0.5 * max_speed**2
+    var = np.empty(m * k)
+    var[:k], var[k : 2 * k] = velocity_std**2, 0.5 * max_speed**2
+    if m == 3:
+        var[2 * k :] = group_velocity_std**2
     dt2 = dt**2
     a = var * dt2 + q * dt**3 / _THREE
     b = var * dt + q * dt2 / _TWO
@@ -279,7 +365,7 @@ def _mixture_state(
     Ad0, Ad1 = A00 * d0 + A01 * d1, A01 * d0 + A11 * d1
     RA00, RA01 = j00 * A00 + j01 * A01, j00 * A01 + j01 * A11
     RA10, RA11 = j01 * A00 + j11 * A01, j01 * A01 + j11 * A11
-    E = np.empty((14, 2 * k))
+    E = np.empty((14, m * k))
     np.subtract(d0, j00 * Ad0 + j01 * Ad1, out=E[0])
     np.subtract(d1, j01 * Ad0 + j11 * Ad1, out=E[1])
     np.multiply(b, Ad0, out=E[2])
@@ -295,11 +381,22 @@ def _mixture_state(
     np.subtract(c, b2 * A00, out=E[11])
     np.subtract(c, b2 * A11, out=E[12])
     np.multiply(-b2, A01, out=E[13])
-    delta = E[:4, :k] - E[:4, k:]
-    E *= beta
-    mix = E[:, :k] + E[:, k:]
-    spread = delta.take(_SPREAD_I, axis=0) * delta.take(_SPREAD_J, axis=0)
-    spread *= beta[:k] * beta[k:]
+    if m == 2:
+        delta = E[:4, :k] - E[:4, k:]
+        E *= beta
+        mix = E[:, :k] + E[:, k:]
+        spread = delta.take(_SPREAD_I, axis=0) * delta.take(_SPREAD_J, axis=0)
+        spread *= beta[:k] * beta[k:]
+    else:
+        E[0:2, 2 * k :] += g * dt[2 * k :]
+        E[2:4, 2 * k :] += g
+        x_m = E[:4].reshape(4, 3, k).copy()
+        E *= beta
+        mix = E[:, :k] + E[:, k : 2 * k] + E[:, 2 * k :]
+        delta = x_m - mix[:4, None, :]  # (4, 3, k)
+        spread = (
+            delta.take(_SPREAD_I, axis=0) * delta.take(_SPREAD_J, axis=0) * beta.reshape(3, k)
+        ).sum(axis=1)
     mix[4:] += spread
     return mix[:4].T.copy(), mix.take(_P_ROWS, axis=0).T.copy().reshape(k, 4, 4)
 
@@ -360,6 +457,8 @@ def pair_candidates(
     pd: float,
     clutter_density: float,
     min_score: float | np.ndarray = -math.inf,
+    group_fraction: float = 0.0,
+    group_velocity_std: float = 1.0,
 ) -> TwoPointTracks:
     """Every (candidate, free detection) pair a target no faster than ``max_speed`` could
     make, at most ``max_pairs`` per candidate (the highest scores), with the two-point state
@@ -371,7 +470,11 @@ def pair_candidates(
     ``ρ = max(0, 1 − v_max Δt / |d|)``: the part of ``d`` beyond the reach of ``v_max``.
     Up to ``BRUTE_FORCE_CELLS`` (candidate, free detection) pairs every pair is scored: the
     floor and the gate reject every pair that the search of larger problems leaves out, so
-    both give the same pairs."""
+    both give the same pairs.
+
+    A candidate with a ``group_velocity`` adds the group component (weight
+    ``group_fraction``, spread ``group_velocity_std``) to its prior (:func:`_score_pairs`).
+    """
     dt_all = t - candidates.time
     offered = (dt_all >= MIN_PAIR_INTERVAL).nonzero()[0]
     free_idx = np.asarray(free).nonzero()[0]
@@ -388,9 +491,14 @@ def pair_candidates(
         gamma=gamma,
     )
     cz, cR, dt_c, base = candidates.z, candidates.R, dt_all, candidates.score
+    vg = candidates.group_velocity
     if n_c < dt_all.size:
         cz, cR = cz.take(offered, axis=0), cR.take(offered, axis=0)
         dt_c, base = dt_c.take(offered), base.take(offered)
+        vg = vg.take(offered, axis=0)
+    grouped = group_fraction > 0.0 and bool(np.isfinite(vg[:, 0]).any())
+    if grouped:
+        kw.update(group_fraction=group_fraction, group_velocity_std=group_velocity_std)
     base = base + (math.log(pd) - math.log(clutter_density))
     if n_c * n_f <= BRUTE_FORCE_CELLS:
         # Every pair, in (candidate, detection) grids.
@@ -402,6 +510,8 @@ def pair_candidates(
         np.add(cR[:, 0, 1, None], T[_J01], out=T[_S01])
         np.add(cR[:, 1, 1, None], T[_J11], out=T[_S11])
         T[_DT] = dt_c[:, None]
+        if grouped:
+            T[_G0 : _G1 + 1] = vg.T[:, :, None]
         _score_pairs(T, base[:, None], **kw)
         score = T[_SCORE]
         # Rival pairs of one candidate, or of one detection, are pruned when far less likely
@@ -418,7 +528,9 @@ def pair_candidates(
             return _no_pairs()
         T, cols = T.reshape(_ROWS, -1), ci * n_f + fj
     else:
-        ci, fj, T, cols = _searched_pairs(cz, cR, dt_c, base, zf, Rf, floor, **kw)
+        ci, fj, T, cols = _searched_pairs(
+            cz, cR, dt_c, base, zf, Rf, floor, vg if grouped else None, **kw
+        )
         if ci.size == 0:
             return _no_pairs()
     # The ``max_pairs`` best of each candidate are kept, best first.
@@ -426,8 +538,8 @@ def pair_candidates(
     if ci.size > max_pairs:
         order = order[rank < max_pairs]
     ci, fj, cols = ci[order], fj[order], cols[order]
-    T = T.take(np.concatenate((cols, cols)), axis=1)  # each pair twice: slow, fast
-    x, P = _mixture_state(T, max_speed=max_speed, velocity_std=velocity_std, q=q)
+    T = T.take(cols, axis=1)
+    x, P = _mixed(T, max_speed, velocity_std, q, group_velocity_std if grouped else None)
     x[:, :2] += cz.take(ci, axis=0)
     return TwoPointTracks(
         candidate=ci if n_c == dt_all.size else offered[ci],
@@ -446,22 +558,23 @@ def _searched_pairs(
     zf: np.ndarray,
     Rf: np.ndarray,
     floor: float | np.ndarray,
+    vg: np.ndarray | None,
     **kw: float,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """The pairs of :func:`pair_candidates` in a large problem: each candidate ``i`` (``cz``,
     ``cR``, ``dt``, ``base`` its rows) searches the free detections ``j`` (``zf``, ``Rf``,
-    ``floor`` a number or theirs) within :func:`search_radius`. Returns ``i`` and ``j`` (by
+    ``floor`` a number or theirs) within :func:`search_radius`, or within the whole velocity
+    gate for a candidate with a group velocity (``vg``, NaN: none). Returns ``i`` and ``j`` (by
     candidate, then detection) of the pairs that pass the floor and the pruning of rivals,
     the table of the pairs searched (``_ROWS``, one column a pair) and their columns."""
     empty = np.zeros(0, dtype=np.intp)
     none = empty, empty, np.zeros((_ROWS, 0)), empty
-    radius = search_radius(
-        dt,
-        base,
-        max_eigenvalue_2x2(cR) + float(max_eigenvalue_2x2(Rf).max()),
-        float(np.min(floor)),
-        **kw,
-    )
+    noise = max_eigenvalue_2x2(cR) + float(max_eigenvalue_2x2(Rf).max())
+    gated = {k: v for k, v in kw.items() if not k.startswith("group_")}
+    radius = search_radius(dt, base, noise, float(np.min(floor)), **gated)
+    if vg is not None:  # the group term can pass anywhere in the velocity gate
+        grouped = np.isfinite(vg[:, 0])
+        radius[grouped] = kw["max_speed"] * dt[grouped] + np.sqrt(kw["gamma"] * noise[grouped])
     searched = (radius >= 0.0).nonzero()[0]
     if searched.size == 0:
         return none
@@ -475,6 +588,7 @@ def _searched_pairs(
         cR.take(ci, axis=0),
         Rf.take(fj, axis=0),
         dt.take(ci),
+        None if vg is None else vg.take(ci, axis=0),
     )
     _score_pairs(T, base.take(ci), **kw)
     score = T[_SCORE]

@@ -189,6 +189,11 @@ class SectionReader:
             raise StateError(f"{self.where}.{name}: holds a number below {ge}")
         return a
 
+    def has(self, name: str) -> bool:
+        """Whether the section holds an array ``name`` (not read yet): for fields that files
+        written by earlier versions lack."""
+        return name in self.arrays
+
     def booleans(self, name: str, shape: tuple[int, ...]) -> np.ndarray:
         return self._array(name, "b", shape)
 

@@ -1,6 +1,7 @@
 """Velocity-gated two-point initiation: worked answers, hand-made scenes, bounded cost."""
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -30,6 +31,7 @@ def candidates_at(z, variance=100.0):
         score=np.zeros(n),
         detection_ids=np.empty(n, dtype=object),
         origin=np.arange(n),
+        group_velocity=np.full((n, 2), np.nan),
     )
 
 
@@ -239,38 +241,61 @@ def test_the_search_radius_shrinks_to_slow_reach_where_fast_starts_cannot_score(
     assert hopeless < 0
 
 
-def _reference_two_point(zc, Rc, zj, Rj, dt, *, max_speed, velocity_std, slow_fraction, q):
-    """One pair the long way: the Kalman update of each component's prior, predicted by the
-    nearly constant velocity model, with the second detection; the moment-matched mixture."""
+def _reference_two_point(
+    zc,
+    Rc,
+    zj,
+    Rj,
+    dt,
+    *,
+    max_speed,
+    velocity_std,
+    slow_fraction,
+    q,
+    group_velocity=None,
+    group_fraction=0.0,
+    group_velocity_std=1.0,
+):
+    """One pair the long way: the Kalman update of each component's prior (slow, fast and,
+    with a group velocity, the group's), predicted by the nearly constant velocity model,
+    with the second detection; the moment-matched mixture."""
     F = np.block([[np.eye(2), dt * np.eye(2)], [np.zeros((2, 2)), np.eye(2)]])
     Q = q * np.block(
         [[dt**3 / 3 * np.eye(2), dt**2 / 2 * np.eye(2)], [dt**2 / 2 * np.eye(2), dt * np.eye(2)]]
     )
     H = np.hstack([np.eye(2), np.zeros((2, 2))])
-    xs, Ps, logw = [], [], []
-    for var in (velocity_std**2, 0.5 * max_speed**2):
-        x0 = F @ np.r_[zc, 0.0, 0.0]
+    grouped = group_velocity is not None and np.isfinite(group_velocity).all()
+    priors = [(np.zeros(2), velocity_std**2), (np.zeros(2), 0.5 * max_speed**2)]
+    if grouped:
+        priors.append((np.asarray(group_velocity, float), group_velocity_std**2))
+    xs, Ps = [], []
+    for v0, var in priors:
+        x0 = F @ np.r_[zc, v0]
         P0 = F @ np.diag([0.0, 0.0, var, var]) @ F.T + Q
         P0[:2, :2] += Rc
         S = H @ P0 @ H.T + Rj
         K = P0 @ H.T @ np.linalg.inv(S)
-        xs.append(x0 + K @ (zj - zc))
+        xs.append(x0 + K @ (zj - x0[:2]))
         Ps.append(P0 - K @ S @ K.T)
-    d = zj - zc
-    S_s = Rc + Rj + (velocity_std**2 * dt**2 + q * dt**3 / 3) * np.eye(2)
-    logw.append(
-        math.log(slow_fraction)
-        - 0.5 * d @ np.linalg.solve(S_s, d)
-        - math.log(2 * math.pi)
-        - 0.5 * math.log(np.linalg.det(S_s))
-    )
+    rest = math.log1p(-group_fraction) if grouped else 0.0
+    logw = []
+    for v0, std, weight in ((np.zeros(2), velocity_std, math.log(slow_fraction) + rest),) + (
+        ((group_velocity, group_velocity_std, math.log(group_fraction)),) if grouped else ()
+    ):
+        d = zj - zc - np.asarray(v0) * dt
+        S_m = Rc + Rj + (std**2 * dt**2 + q * dt**3 / 3) * np.eye(2)
+        logw.append(
+            weight
+            - 0.5 * d @ np.linalg.solve(S_m, d)
+            - math.log(2 * math.pi)
+            - 0.5 * math.log(np.linalg.det(S_m))
+        )
     g_f = 1.0 / (math.pi * (max_speed * dt) ** 2 + 2 * math.pi * math.sqrt(np.linalg.det(Rc + Rj)))
-    logw.append(math.log1p(-slow_fraction) + math.log(g_f))
-    loglik = np.logaddexp(*logw)
+    logw.insert(1, math.log1p(-slow_fraction) + rest + math.log(g_f))
+    loglik = np.logaddexp.reduce(logw)
     beta = np.exp(np.array(logw) - loglik)
-    x = beta[0] * xs[0] + beta[1] * xs[1]
-    delta = xs[0] - xs[1]
-    P = beta[0] * Ps[0] + beta[1] * Ps[1] + beta[0] * beta[1] * np.outer(delta, delta)
+    x = sum(b * xm for b, xm in zip(beta, xs, strict=True))
+    P = sum(b * (Pm + np.outer(xm - x, xm - x)) for b, xm, Pm in zip(beta, xs, Ps, strict=True))
     return x, P, loglik
 
 
@@ -301,6 +326,84 @@ def test_two_point_estimate_matches_per_pair_kalman_updates(seed):
         np.testing.assert_array_equal(P[i], P[i].T)
 
 
+@pytest.mark.parametrize("seed", range(3))
+def test_the_group_component_matches_per_pair_kalman_updates(seed):
+    """With group velocities (some pairs without: NaN), the three-component mixture agrees
+    with the Kalman updates and moment matching done pair by pair."""
+    rng = np.random.default_rng(100 + seed)
+    n = 30
+    kw = dict(max_speed=700.0, velocity_std=15.0, slow_fraction=0.8, q=0.5)
+    group = dict(group_fraction=0.5, group_velocity_std=10.0)
+    zc = rng.uniform(-1e4, 1e4, (n, 2))
+    dt = rng.uniform(0.1, 6.0, n)
+    vg = rng.uniform(-400.0, 400.0, (n, 2))
+    v = np.where(rng.random(n)[:, None] < 0.6, vg + rng.normal(0, 10.0, (n, 2)), -vg)
+    vg[rng.random(n) < 0.3] = np.nan
+    zj = zc + v * dt[:, None]
+    Rc, Rj = _random_covariances(rng, n, 20.0), _random_covariances(rng, n, 40.0)
+    x, P, loglik = two_point_estimate(zc, Rc, zj, Rj, dt, group_velocity=vg, **kw, **group)
+    for i in range(n):
+        x_ref, P_ref, ll_ref = _reference_two_point(
+            zc[i], Rc[i], zj[i], Rj[i], dt[i], group_velocity=vg[i], **kw, **group
+        )
+        np.testing.assert_allclose(x[i], x_ref, rtol=1e-9, atol=1e-9 * np.abs(x_ref).max())
+        np.testing.assert_allclose(P[i], P_ref, rtol=1e-8, atol=1e-9 * np.abs(P_ref).max())
+        assert loglik[i] == pytest.approx(ll_ref, rel=1e-10, abs=1e-10)
+    # Without any group velocity the result is the two-component mixture, bit for bit.
+    none = np.full((n, 2), np.nan)
+    a = two_point_estimate(zc, Rc, zj, Rj, dt, group_velocity=none, **kw, **group)
+    b = two_point_estimate(zc, Rc, zj, Rj, dt, **kw)
+    for u, w in zip(a, b, strict=True):
+        np.testing.assert_array_equal(u, w)
+
+
+def test_a_group_velocity_prunes_the_pair_with_a_neighbours_detection():
+    """A candidate beside a fast confirmed track (its group velocity (300, 0) m/s) and, one
+    second later, its own detection and a neighbour's 250 m to the side: as a fast target
+    alone both pairs are alike and both start tracks; with the group's velocity its own is
+    far likelier, and the other is pruned."""
+    cand = candidates_at(np.zeros((1, 2)))
+    z = np.array([[302.0, 5.0], [300.0, 250.0]])
+    R = np.tile(100.0 * np.eye(2), (2, 1, 1))
+    kw = dict(clutter_density=1e-6, **PAIRING)
+    free = np.ones(2, dtype=bool)
+    alone = pair_candidates(cand, z, R, free, 1.0, **kw)
+    assert sorted(alone.detection.tolist()) == [0, 1]
+    grouped = replace(cand, group_velocity=np.array([[300.0, 0.0]]))
+    with_group = pair_candidates(
+        grouped, z, R, free, 1.0, group_fraction=0.5, group_velocity_std=10.0, **kw
+    )
+    assert with_group.detection.tolist() == [0]
+    assert with_group.score[0] > alone.score[alone.detection == 0][0] + 3.0
+    np.testing.assert_allclose(with_group.x[0, 2:], [300.0, 0.0], atol=15.0)
+    assert np.sqrt(with_group.P[0, 2, 2]) < 15.0
+
+
+def test_a_new_candidate_takes_the_velocity_of_the_nearest_fast_confirmed_track():
+    """A detection that opens a candidate within group_radius of a confirmed track at least
+    group_min_speed fast gets that track's velocity; far away, or beside a slow track, none."""
+    tr = IndividualTracker(TrackerConfig())
+    v = np.array([-200.0, 300.0])
+    parked = np.array([-20000.0, 0.0])
+    for k in range(8):
+        res = tr.step(scan_at(float(k), [[5000.0, 800.0] + v * k, parked], sigma=20.0))
+    assert len(res.confirmed()) == 2
+    fast = next(t for t in res.confirmed() if np.hypot(*t.velocity) > 100.0)
+    # Three new detections: 400 m from the fast track, 5 km from it, 300 m from the parked one.
+    near = np.asarray(fast.position) + v + [400.0, 0.0]
+    far = np.asarray(fast.position) + v + [5000.0, 0.0]
+    tr.step(scan_at(8.0, [[5000.0, 800.0] + v * 8, parked, near, far, parked + 300.0], sigma=20.0))
+    cand = tr.candidates
+    fresh = cand.time == 8.0
+    by_place = {
+        tuple(np.round(z)): g
+        for z, g in zip(cand.z[fresh], cand.group_velocity[fresh], strict=True)
+    }
+    np.testing.assert_allclose(by_place[tuple(np.round(near))], fast.velocity, atol=30.0)
+    assert np.isnan(by_place[tuple(np.round(far))]).all()
+    assert np.isnan(by_place[tuple(np.round(parked + 300.0))]).all()
+
+
 @pytest.mark.parametrize("dense", [False, True])
 @pytest.mark.parametrize("floor", [-math.inf, -6.9, 0.0, "per_detection"])
 def test_small_problems_score_every_pair_with_the_same_result_as_the_search(
@@ -321,6 +424,7 @@ def test_small_problems_score_every_pair_with_the_same_result_as_the_search(
             score=rng.uniform(-5.0, 3.0, n_c),
             detection_ids=np.empty(n_c, dtype=object),
             origin=np.arange(n_c),
+            group_velocity=np.full((n_c, 2), np.nan),
         )
         z = rng.uniform(-span, span, (n_z, 2))
         near = rng.integers(0, n_c, n_z // 2)

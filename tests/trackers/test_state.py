@@ -58,8 +58,9 @@ def tracks_of(p: TrackingPipeline) -> list[tuple[Any, ...]]:
 
 def candidates_of(p: TrackingPipeline) -> list[Any]:
     c = p.point.candidates  # type: ignore[attr-defined]
-    arrays = (c.z, c.R, c.time, c.score, c.origin, c.detection_ids)
-    return [a.tolist() for a in arrays]
+    grouped = np.isfinite(c.group_velocity)
+    arrays = (c.z, c.R, c.time, c.score, c.origin, c.detection_ids, grouped)
+    return [a.tolist() for a in arrays] + [c.group_velocity[grouped].tolist()]
 
 
 def restarted(p: TrackingPipeline, config: TrackerConfig | None = None) -> TrackingPipeline:
@@ -69,6 +70,27 @@ def restarted(p: TrackingPipeline, config: TrackerConfig | None = None) -> Track
     q = TrackingPipeline(config)
     q.import_state(state)
     return q
+
+
+def test_candidates_keep_their_group_velocities_and_older_files_have_none() -> None:
+    p = TrackingPipeline(TrackerConfig())
+    v = np.array([-200.0, 300.0])
+    for k in range(9):
+        z = [[5000.0, 800.0] + v * k] + ([[5400.0, 800.0] + v * k] if k == 8 else [])
+        R = np.tile(400.0 * np.eye(2), (len(z), 1, 1))
+        p.process(Scan(sensor_id="s", time=float(k), z=np.array(z), R=R))
+    c = p.point.candidates  # type: ignore[attr-defined]
+    assert np.isfinite(c.group_velocity).all(axis=1).sum() == 1  # the detection beside it
+    assert candidates_of(restarted(p)) == candidates_of(p)
+    state = p.export_state()
+    arrays = dict(state.point.arrays)
+    del arrays["candidates.grouped"], arrays["candidates.group_velocity"]
+    older = PipelineState(
+        state.last_time, state.point_kind, StateSection(state.point.values, arrays), state.peers
+    )
+    q = TrackingPipeline(TrackerConfig())
+    q.import_state(older)
+    assert np.isnan(q.point.candidates.group_velocity).all()  # type: ignore[attr-defined]
 
 
 @pytest.mark.parametrize("at", [0, 1, 2, 40])
