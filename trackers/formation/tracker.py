@@ -509,7 +509,12 @@ def _match_one(
     max_shift = np.sqrt(gamma * (np.diag(Sc) + sigma**2))
     miss = math.sqrt(gamma * float(np.linalg.eigvalsh(S_pos.mean(axis=0) + R.mean(axis=0))[-1]))
     best = match_template(A, B, mu, max_shift=max_shift, miss_cost=miss)
-    if N >= 3 and Z.shape[0] >= 2 and (best is None or best.count < min(N, Z.shape[0])):
+    # The turned and scaled templates are tried when fewer members were matched than there
+    # are detections within reach of one (a member's miss, with no detection near it, does
+    # not call for them).
+    d = np.hypot(zhat[:, None, 0] - Z[None, :, 0], zhat[:, None, 1] - Z[None, :, 1])
+    reachable = int((d.min(axis=0) <= miss).sum())
+    if N >= 3 and reachable >= 2 and (best is None or best.count < min(N, reachable)):
         for s, turn in [(1.0, a) for a in _TURNS] + [(k, 0.0) for k in _SCALES]:
             At = s * (A @ _rotation(turn).T)
             m = match_template(At, B, mu, max_shift=max_shift, miss_cost=miss)
