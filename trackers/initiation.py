@@ -34,6 +34,17 @@ model over ``Δt`` and updated with ``z_j``; the component weights are proportio
 component is the classical two-point difference, ``v = d / Δt`` with covariance
 ``(R_c + R_j) / Δt²``.
 
+Targets move in groups. A candidate that opened near a fast confirmed track carries that
+track's velocity ``v_g`` (:attr:`Candidates.group_velocity`), and its prior has a third
+component, weight ``w_g``: the target moves with the track, ``v ~ N(v_g, σ_g² I)``, so
+
+    g₂ = (1 − w_g) (w N(d; 0, S_s) + (1 − w) g_f) + w_g N(d − v_g Δt; 0, S_g),
+    S_g = R_c + R_j + (σ_g² Δt² + q Δt³/3) I,
+
+and its Kalman posterior (the prior ``[z_c, v_g]``) joins the mixture. A formation member's
+own pair then outweighs the pairs that join it to a neighbour's detection, which the uniform
+fast component alone cannot tell apart, and starts with the group's velocity.
+
 A candidate offered a scan continues as its *missed* branch, ``L ← L + ln(1 − P_D)``, whether
 or not it paired; it is dropped when ``L ≤ T_d`` or when older than ``candidate_max_age``.
 A pair less likely than 1/100 of the best pair of its candidate or of its detection is pruned
