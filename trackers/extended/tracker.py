@@ -125,6 +125,13 @@ class ExtendedTrack:
     split_centroid: tuple[float, float] = (0.0, 0.0)
     split_gap: float = 0.0
     split_time: float = 0.0
+    #: The same for a lone detection moving away from the largest subset (a vehicle leaving
+    #: the group by itself): after :data:`SPLIT_SCANS` scans it is shed, left to the
+    #: individual tracker, for as long as it goes on moving away.
+    shed_evidence: int = 0
+    shed_centroid: tuple[float, float] = (0.0, 0.0)
+    shed_gap: float = 0.0
+    shed_time: float = 0.0
     #: When its detections were first seen together (its cluster's first scan, before it was
     #: born); individual tracks created since, inside its extent, came from its detections.
     origin: float = math.inf
@@ -533,6 +540,12 @@ class ExtendedTracker:
             )
             split_rows = np.array(split, dtype=np.intp)
             splitting = evidence >= SPLIT_SCANS and not claimed[split_rows].any()
+            shed_n, shed, shed_c, shed_d = _lone_evidence(track, points, parts, left_out, t, cfg)
+            if shed_n >= SPLIT_SCANS and shed in chosen and not splitting:
+                # a vehicle leaving by itself: its detection is left to the individual
+                # tracker, the extent follows the rest
+                chosen = [r for r in chosen if r != shed]
+                fitted = None
             if splitting:  # the parent keeps the rest, its extent fitted to it afresh
                 leaving = set(split)
                 chosen = [r for r in chosen if r not in leaving]
@@ -569,6 +582,10 @@ class ExtendedTracker:
                 split_centroid=split_c,
                 split_gap=split_d,
                 split_time=t,
+                shed_evidence=shed_n,
+                shed_centroid=shed_c,
+                shed_gap=shed_d,
+                shed_time=t if shed is not None or not shed_n else track.shed_time,
                 origin=track.origin,
                 visitors=track.visitors,
             )
@@ -1056,6 +1073,58 @@ def _split_evidence(
     rows = max(others, key=lambda r: apart(r, c_main))
     cs = centroid[id(rows)]
     return 1, rows, cs, apart(rows, c_main), velocity
+
+
+def _lone_evidence(
+    track: ExtendedTrack,
+    points: dict[int, tuple[float, ...]],
+    parts: list[list[int]],
+    left_out: list[list[int]],
+    t: float,
+    cfg: ExtendedConfig,
+) -> tuple[int, int | None, tuple[float, float], float]:
+    """The evidence that one vehicle is leaving the group by itself (the track's ``shed_*``
+    fields; :func:`_split_evidence` does the same for groups of two or more). A detection
+    alone in its subset (more than the resolution distance from every other) starts it. It
+    grows at each scan when a detection outside the largest subset is where that one could
+    have gone (``max_speed`` times the interval, plus half a resolution distance) and farther
+    from the track's predicted centroid than it was: the centroid is steadier than the
+    largest subset's (a column's detections fall into parts as members are missed); a
+    detection chained to a false alarm still counts. A scan without one lowers it by one
+    (a vehicle is missed one scan in ten), keeping the last place and time. Returns the
+    evidence, the detection's row (``None`` if none this scan), its position and its gap."""
+    prev_n, prev = track.shed_evidence, track.shed_centroid
+    if not parts:
+        return 0, None, (0.0, 0.0), 0.0
+    cx, cy, vx, vy = track.estimate.x.tolist()
+    lag = t - track.time
+    hub = (cx + vx * lag, cy + vy * lag)
+    main = max(parts, key=len)
+    dt = t - track.shed_time
+    if prev_n and dt > 0:
+        window = 0.5 * cfg.resolution_distance + cfg.max_speed * dt
+        best: tuple[float, int] | None = None
+        for part in parts + left_out:
+            if part is main:
+                continue
+            for r in part:
+                x, y = points[r][:2]
+                d = _hypot(x - prev[0], y - prev[1])
+                if d <= window and (best is None or d < best[0]):
+                    best = (d, r)
+        if best is None:
+            return prev_n - 1, None, prev, track.shed_gap
+        r = best[1]
+        x, y = points[r][:2]
+        gap = _hypot(x - hub[0], y - hub[1])
+        if gap > track.shed_gap:
+            return prev_n + 1, r, (x, y), gap
+    alone = [part[0] for part in parts + left_out if len(part) == 1 and part is not main]
+    if not alone:
+        return 0, None, (0.0, 0.0), 0.0
+    r = max(alone, key=lambda r: _hypot(points[r][0] - hub[0], points[r][1] - hub[1]))
+    x, y = points[r][:2]
+    return 1, r, (x, y), _hypot(x - hub[0], y - hub[1])
 
 
 def _spread(

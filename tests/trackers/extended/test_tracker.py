@@ -177,6 +177,39 @@ def test_a_vehicle_coming_up_to_a_group_keeps_its_track_as_it_passes():
     assert None not in ids and len(set(ids)) == 1
 
 
+@pytest.mark.parametrize("seed", range(3))
+def test_a_vehicle_leaving_its_column_alone_gets_its_own_track(seed):
+    """Six vehicles 60 m apart at 10 m/s, one extended track; at t = 100 s the lead speeds up
+    to 17 m/s and drives away alone. Its detection, a subset of its own once 200 m ahead,
+    keeps moving away from the track's centroid, so after three scans it is left to the
+    individual tracker: the lead has a confirmed individual track when 450 m ahead (before,
+    the extent stretched to hold it 1.4 km ahead, and it had none), and the extended track
+    stays on the other five."""
+    rng = np.random.default_rng(seed)
+    p = TrackingPipeline.all_kinds()
+    lead_track = None
+    for k in range(34):
+        t = 5.0 * k
+        pos = np.array([[10.0 * t - 60.0 * i, 0.0] for i in range(6)])
+        if t > 100.0:
+            pos[0, 0] = 1000.0 + 17.0 * (t - 100.0)
+        z = pos[rng.random(6) < 0.9]
+        z = np.vstack([z + rng.normal(0, 10.0, z.shape), rng.uniform(-2e3, 3e3, (3, 2))])
+        conf = p.process(
+            Scan("s", t, z, np.tile(R, (len(z), 1, 1)), pd=0.9, clutter_density=1e-7)
+        ).confirmed()
+        gap = pos[0, 0] - pos[1, 0]
+        near = [
+            tr for tr in conf if tr.kind == "individual" and np.hypot(*(tr.position - pos[0])) < 50
+        ]
+        if near and lead_track is None:
+            lead_track = gap
+    assert lead_track is not None and lead_track <= 450.0
+    rest = pos[1:].mean(axis=0)
+    ext = [t for t in conf if t.kind == "extended"]
+    assert len(ext) == 1 and np.hypot(*(ext[0].position - rest)) < 100.0
+
+
 def _view_of(xy, v, confirmed):
     from trackers.peers import PointTrackView
 
