@@ -1084,42 +1084,40 @@ def _lone_evidence(
     cfg: ExtendedConfig,
 ) -> tuple[int, int | None, tuple[float, float], float]:
     """The evidence that one vehicle is leaving the group by itself (the track's ``shed_*``
-    fields; :func:`_split_evidence` does the same for groups of two or more). A detection
-    alone in its subset (more than the resolution distance from every other) starts it. It
-    grows at each scan when a detection outside the largest subset is where that one could
-    have gone (``max_speed`` times the interval, plus half a resolution distance) and farther
-    from the track's predicted centroid than it was: the centroid is steadier than the
-    largest subset's (a column's detections fall into parts as members are missed); a
-    detection chained to a false alarm still counts. A scan without one lowers it by one
-    (a vehicle is missed one scan in ten), keeping the last place and time. Returns the
-    evidence, the detection's row (``None`` if none this scan), its position and its gap."""
-    prev_n, prev = track.shed_evidence, track.shed_centroid
+    fields; :func:`_split_evidence` does the same for groups of two or more): a detection
+    alone in its subset (more than the resolution distance from every other), outside the
+    largest subset, that moves away from the track's predicted centroid ``c`` faster than
+    the group's members move about it. It grows at each scan when such a detection is where
+    the last one could have gone (``max_speed`` times the interval, plus half a resolution
+    distance, around the last one carried along with the track) and its gap to ``c`` has
+    grown by more than ``group_speed_spread`` times the interval; the centroid is steadier
+    than the largest subset's, whose parts come and go as members are missed. A scan without
+    one lowers it by one (a vehicle is missed one scan in ten) and keeps the last place,
+    gap and time; members of a column that drives on keep their gaps and never add up.
+    Returns the evidence, the detection's row (``None`` if none this scan), its position and
+    its gap."""
+    prev_n, prev, prev_gap = track.shed_evidence, track.shed_centroid, track.shed_gap
     if not parts:
-        return 0, None, (0.0, 0.0), 0.0
+        return max(prev_n - 1, 0), None, prev, prev_gap
     cx, cy, vx, vy = track.estimate.x.tolist()
     lag = t - track.time
     hub = (cx + vx * lag, cy + vy * lag)
     main = max(parts, key=len)
-    dt = t - track.shed_time
-    if prev_n and dt > 0:
-        window = 0.5 * cfg.resolution_distance + cfg.max_speed * dt
-        best: tuple[float, int] | None = None
-        for part in parts + left_out:
-            if part is main:
-                continue
-            for r in part:
-                x, y = points[r][:2]
-                d = _hypot(x - prev[0], y - prev[1])
-                if d <= window and (best is None or d < best[0]):
-                    best = (d, r)
-        if best is None:
-            return prev_n - 1, None, prev, track.shed_gap
-        r = best[1]
-        x, y = points[r][:2]
-        gap = _hypot(x - hub[0], y - hub[1])
-        if gap > track.shed_gap:
-            return prev_n + 1, r, (x, y), gap
     alone = [part[0] for part in parts + left_out if len(part) == 1 and part is not main]
+    dt = t - track.shed_time
+    if prev_n and dt <= 0:  # another sensor's scan of the same instant: nothing new
+        return prev_n, None, prev, prev_gap
+    if prev_n:
+        px, py = prev[0] + vx * dt, prev[1] + vy * dt
+        window = 0.5 * cfg.resolution_distance + cfg.max_speed * dt
+        near = [r for r in alone if _hypot(points[r][0] - px, points[r][1] - py) <= window]
+        if near:
+            r = min(near, key=lambda r: _hypot(points[r][0] - px, points[r][1] - py))
+            x, y = points[r][:2]
+            gap = _hypot(x - hub[0], y - hub[1])
+            if gap > prev_gap:
+                return prev_n + 1, r, (x, y), gap
+        return prev_n - 1, None, prev, prev_gap
     if not alone:
         return 0, None, (0.0, 0.0), 0.0
     r = max(alone, key=lambda r: _hypot(points[r][0] - hub[0], points[r][1] - hub[1]))

@@ -509,12 +509,20 @@ def _match_one(
     max_shift = np.sqrt(gamma * (np.diag(Sc) + sigma**2))
     miss = math.sqrt(gamma * float(np.linalg.eigvalsh(S_pos.mean(axis=0) + R.mean(axis=0))[-1]))
     best = match_template(A, B, mu, max_shift=max_shift, miss_cost=miss)
-    # The turned and scaled templates are tried when fewer members were matched than there
-    # are detections within reach of one (a member's miss, with no detection near it, does
-    # not call for them).
-    d = np.hypot(zhat[:, None, 0] - Z[None, :, 0], zhat[:, None, 1] - Z[None, :, 1])
-    reachable = int((d.min(axis=0) <= miss).sum())
-    if N >= 3 and reachable >= 2 and (best is None or best.count < min(N, reachable)):
+    if N >= 3 and Z.shape[0] >= 2 and (best is None or best.count < min(N, Z.shape[0])):
+        # The turned and scaled templates are tried when fewer members were matched than
+        # there are detections within reach of one of them: of a member's prediction, by
+        # the miss cost plus the most that turning or scaling moves it (a member's miss,
+        # with no detection near it, does not call for them).
+        r_max = float(np.sqrt((A * A).sum(axis=1).max()))
+        moved = r_max * max(
+            2.0 * math.sin(0.5 * max(map(abs, _TURNS))), *(abs(k - 1.0) for k in _SCALES)
+        )
+        d = np.hypot(zhat[:, None, 0] - Z[None, :, 0], zhat[:, None, 1] - Z[None, :, 1])
+        reachable = int((d.min(axis=0) <= miss + moved).sum())
+    else:
+        reachable = 0
+    if reachable >= 2 and (best is None or best.count < min(N, reachable)):
         for s, turn in [(1.0, a) for a in _TURNS] + [(k, 0.0) for k in _SCALES]:
             At = s * (A @ _rotation(turn).T)
             m = match_template(At, B, mu, max_shift=max_shift, miss_cost=miss)

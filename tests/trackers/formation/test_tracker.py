@@ -20,6 +20,7 @@ from trackers.config import TrackerConfig
 from trackers.formation.tracker import (
     FormationTracker,
     _joining,
+    _match_one,
     _moving_together,
     _new_formation,
     _shared_modes,
@@ -245,3 +246,18 @@ def test_switching_formations_off_hands_every_member_back() -> None:
     ]
     live = set(p.point.predicted(p.last_time).ids)
     assert members <= live
+
+
+@pytest.mark.parametrize("turn", [0.1, 0.15, 0.2])
+def test_a_formation_turned_since_its_prediction_matches_every_member(turn):
+    """Four members in line (±300 m, ±900 m) whose detections have turned about the centre
+    since the prediction: the outer ones lie beyond the miss cost of every predicted member
+    (135-180 m at 0.15-0.2 rad), yet within reach of the turned templates, which are tried
+    and match all four."""
+    zhat = np.array([[-900.0, 0.0], [-300.0, 0.0], [300.0, 0.0], [900.0, 0.0]])
+    c, s = np.cos(turn), np.sin(turn)
+    Z = zhat @ np.array([[c, -s], [s, c]]).T
+    cov = np.tile(800.0 * np.eye(2), (4, 1, 1))
+    vel = np.tile([200.0, 0.0], (4, 1))
+    assign = _match_one(zhat, cov, vel, Z, cov, 9.21)
+    assert assign.tolist() == [0, 1, 2, 3]
