@@ -642,7 +642,7 @@ class Checkpoint:
         for name in _CANDIDATE_NUMBERS:
             arrays[f"candidates.{name}"] = getattr(cand, name)
         _put_strings(arrays, "candidates.detection_ids", cand.detection_ids.tolist())
-        grouped = np.isfinite(cand.group_velocity[:, 0])
+        grouped = np.isfinite(cand.group_velocity).all(axis=1)
         arrays["candidates.grouped"] = grouped
         arrays["candidates.group_velocity"] = np.where(grouped[:, None], cand.group_velocity, 0.0)
         values = {

@@ -226,7 +226,7 @@ def _score_pairs(
         top = np.maximum(a_s, a_f)
         loglik = np.add(top, np.log(np.exp(a_s - top) + np.exp(a_f - top)), out=T[_LL])
     else:
-        grouped = np.isfinite(T[_G0])
+        grouped = np.isfinite(T[_G0]) & np.isfinite(T[_G1])
         g0, g1 = np.where(grouped, T[_G0], 0.0), np.where(grouped, T[_G1], 0.0)
         e0, e1 = d0 - g0 * dt, d1 - g1 * dt
         alpha_g = np.array(group_velocity_std**2) * dt**2 + q * dt**3 / _THREE
@@ -279,7 +279,7 @@ def two_point_estimate(
     R_c = np.asarray(R_c, dtype=float).reshape(-1, 2, 2)
     R_j = np.asarray(R_j, dtype=float).reshape(-1, 2, 2)
     v_g = None if group_velocity is None else np.asarray(group_velocity, float).reshape(-1, 2)
-    grouped = v_g is not None and group_fraction > 0.0 and bool(np.isfinite(v_g[:, 0]).any())
+    grouped = v_g is not None and group_fraction > 0.0 and bool(np.isfinite(v_g).all(axis=1).any())
     T = _pair_table(z_j - z_c, R_c, R_j, dt, v_g if grouped else None)
     group = dict(group_fraction=group_fraction, group_velocity_std=group_velocity_std)
     _score_pairs(
@@ -507,7 +507,7 @@ def pair_candidates(
         cz, cR = cz.take(offered, axis=0), cR.take(offered, axis=0)
         dt_c, base = dt_c.take(offered), base.take(offered)
         vg = vg.take(offered, axis=0)
-    grouped = group_fraction > 0.0 and bool(np.isfinite(vg[:, 0]).any())
+    grouped = group_fraction > 0.0 and bool(np.isfinite(vg).all(axis=1).any())
     if grouped:
         kw.update(group_fraction=group_fraction, group_velocity_std=group_velocity_std)
     base = base + (math.log(pd) - math.log(clutter_density))
@@ -584,7 +584,7 @@ def _searched_pairs(
     gated = {k: v for k, v in kw.items() if not k.startswith("group_")}
     radius = search_radius(dt, base, noise, float(np.min(floor)), **gated)
     if vg is not None:  # the group term can pass anywhere in the velocity gate
-        grouped = np.isfinite(vg[:, 0])
+        grouped = np.isfinite(vg).all(axis=1)
         radius[grouped] = kw["max_speed"] * dt[grouped] + np.sqrt(kw["gamma"] * noise[grouped])
     searched = (radius >= 0.0).nonzero()[0]
     if searched.size == 0:
