@@ -1086,16 +1086,15 @@ def _lone_evidence(
     """The evidence that one vehicle is leaving the group by itself (the track's ``shed_*``
     fields; :func:`_split_evidence` does the same for groups of two or more): a detection
     alone in its subset (more than the resolution distance from every other), outside the
-    largest subset, that moves away from the track's predicted centroid ``c`` faster than
-    the group's members move about it. It grows at each scan when such a detection is where
-    the last one could have gone (``max_speed`` times the interval, plus half a resolution
-    distance, around the last one carried along with the track) and its gap to ``c`` has
-    grown by more than ``group_speed_spread`` times the interval; the centroid is steadier
-    than the largest subset's, whose parts come and go as members are missed. A scan without
-    one lowers it by one (a vehicle is missed one scan in ten) and keeps the last place,
-    gap and time; members of a column that drives on keep their gaps and never add up.
-    Returns the evidence, the detection's row (``None`` if none this scan), its position and
-    its gap."""
+    largest subset, that moves away from the track's predicted centroid ``c``. It grows at
+    each scan when such a detection is where the last one could have gone (``max_speed``
+    times the interval, plus half a resolution distance, around the last one carried along
+    with the track) and its gap to ``c`` has grown; the centroid is steadier than the
+    largest subset's, whose parts come and go as members are missed. A scan without one, or
+    with one no farther out, lowers it by one (a vehicle is missed one scan in ten) and
+    keeps the last place, gap and time; members of a column that drives on keep their gaps
+    about the centroid and seldom add up to three. Returns the evidence, the detection's row
+    (``None`` if none this scan), its position and its gap."""
     prev_n, prev, prev_gap = track.shed_evidence, track.shed_centroid, track.shed_gap
     if not parts:
         return max(prev_n - 1, 0), None, prev, prev_gap
