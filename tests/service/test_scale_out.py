@@ -10,6 +10,7 @@ and names it missing; a configuration change on one instance reaches the other.
 from __future__ import annotations
 
 import signal
+import socket
 import subprocess
 import sys
 import time
@@ -49,6 +50,23 @@ class Deployment:
         )
         self.instances: dict[str, ServiceProcess] = {}
         self.session: zenoh.Session | None = None
+        self._wait_router_listening()
+
+    def _wait_router_listening(self, timeout: float = 30.0) -> None:
+        """Until the router accepts TCP connections: an instance in client mode that finds no
+        router exits at once (a loaded machine starts the router in a second or more)."""
+        port = int(self.router_endpoint.rsplit(":", 1)[1])
+        deadline = time.monotonic() + timeout
+        while True:
+            if self.router.poll() is not None:
+                raise AssertionError(f"router exited: {self.router.communicate()[1]!r}")
+            try:
+                socket.create_connection(("127.0.0.1", port), timeout=0.5).close()
+                return
+            except OSError:
+                if time.monotonic() > deadline:
+                    raise
+                time.sleep(0.1)
 
     def start_instance(self, name: str, sector: str) -> ServiceProcess:
         proc = ServiceProcess(
