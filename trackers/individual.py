@@ -1086,11 +1086,9 @@ def _group_velocities(z: np.ndarray, tracks: TrackArrays, init: InitiationConfig
     if j.size == 0:
         return out
     d2 = np.sum((np.take(p, k, axis=0) - np.take(z, j, axis=0)) ** 2, axis=1)
-    order = np.lexsort((d2, j))  # by detection, nearest first
-    j, k = j[order], k[order]
-    first = np.ones(j.size, dtype=bool)
-    first[1:] = j[1:] != j[:-1]
-    out[j[first]] = np.take(v, np.take(rows, k[first]), axis=0)
+    order, rank = sort_within_groups(j, -d2)  # by detection, nearest first
+    nearest = order[rank == 0]
+    out[j[nearest]] = np.take(v, np.take(rows, k[nearest]), axis=0)
     return out
 
 

@@ -509,7 +509,9 @@ def pair_candidates(
         vg = vg.take(offered, axis=0)
     grouped = group_fraction > 0.0 and bool(np.isfinite(vg).all(axis=1).any())
     if grouped:
-        kw.update(group_fraction=group_fraction, group_velocity_std=group_velocity_std)
+        group = dict(group_fraction=group_fraction, group_velocity_std=group_velocity_std)
+    else:
+        group = {}
     base = base + (math.log(pd) - math.log(clutter_density))
     if n_c * n_f <= BRUTE_FORCE_CELLS:
         # Every pair, in (candidate, detection) grids.
@@ -523,7 +525,7 @@ def pair_candidates(
         T[_DT] = dt_c[:, None]
         if grouped:
             T[_G0 : _G1 + 1] = vg.T[:, :, None]
-        _score_pairs(T, base[:, None], **kw)
+        _score_pairs(T, base[:, None], **kw, **group)
         score = T[_SCORE]
         # Rival pairs of one candidate, or of one detection, are pruned when far less likely
         # than the best of them.
@@ -540,7 +542,7 @@ def pair_candidates(
         T, cols = T.reshape(_ROWS, -1), ci * n_f + fj
     else:
         ci, fj, T, cols = _searched_pairs(
-            cz, cR, dt_c, base, zf, Rf, floor, vg if grouped else None, **kw
+            cz, cR, dt_c, base, zf, Rf, floor, vg if grouped else None, group, **kw
         )
         if ci.size == 0:
             return _no_pairs()
@@ -570,19 +572,20 @@ def _searched_pairs(
     Rf: np.ndarray,
     floor: float | np.ndarray,
     vg: np.ndarray | None,
+    group: dict[str, float],
     **kw: float,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """The pairs of :func:`pair_candidates` in a large problem: each candidate ``i`` (``cz``,
     ``cR``, ``dt``, ``base`` its rows) searches the free detections ``j`` (``zf``, ``Rf``,
     ``floor`` a number or theirs) within :func:`search_radius`, or within the whole velocity
-    gate for a candidate with a group velocity (``vg``, NaN: none). Returns ``i`` and ``j`` (by
+    gate for a candidate with a group velocity (``vg``, NaN: none; ``group`` the weight and
+    spread of the group component, empty without one). Returns ``i`` and ``j`` (by
     candidate, then detection) of the pairs that pass the floor and the pruning of rivals,
     the table of the pairs searched (``_ROWS``, one column a pair) and their columns."""
     empty = np.zeros(0, dtype=np.intp)
     none = empty, empty, np.zeros((_ROWS, 0)), empty
     noise = max_eigenvalue_2x2(cR) + float(max_eigenvalue_2x2(Rf).max())
-    gated = {k: v for k, v in kw.items() if not k.startswith("group_")}
-    radius = search_radius(dt, base, noise, float(np.min(floor)), **gated)
+    radius = search_radius(dt, base, noise, float(np.min(floor)), **kw)
     if vg is not None:  # the group term can pass anywhere in the velocity gate
         grouped = np.isfinite(vg).all(axis=1)
         radius[grouped] = kw["max_speed"] * dt[grouped] + np.sqrt(kw["gamma"] * noise[grouped])
@@ -601,7 +604,7 @@ def _searched_pairs(
         dt.take(ci),
         None if vg is None else vg.take(ci, axis=0),
     )
-    _score_pairs(T, base.take(ci), **kw)
+    _score_pairs(T, base.take(ci), **kw, **group)
     score = T[_SCORE]
     # Rival pairs of one candidate, or of one detection, are pruned when far less likely than
     # the best of them.

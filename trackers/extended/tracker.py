@@ -52,9 +52,7 @@ from trackers.association.gating import max_eigenvalue_2x2
 from trackers.association.spatial import pairs_within
 from trackers.config import ExtendedConfig, TrackerConfig, TrackManagementConfig
 from trackers.extended.partition import (
-    UNION_FIND_EDGES,
     close_pairs,
-    edge_groups,
     pair_subsets,
     point_subsets,
 )
@@ -667,14 +665,10 @@ class ExtendedTracker:
             i, j = pairs[:, 0], pairs[:, 1]
             both = np.flatnonzero(free[i] & free[j])
             i, j = np.take(i, both), np.take(j, both)
-        # The clusters: the subsets of at least min_detections (≥ 2) free detections, as
-        # sorted row lists in order of their first row; their centroids in plain floats.
-        least = max(2, cfg.min_detections)
-        if len(i) <= UNION_FIND_EDGES:
-            groups = edge_groups(i.tolist(), j.tolist())
-            clusters = sorted(sorted(g) for g in groups if len(g) >= least)
-        else:
-            clusters = [s.tolist() for s in pair_subsets(scan.size, i, j, least)]
+        # The clusters: the subsets of at least min_detections (≥ 2) free detections (rows
+        # ascending, in order of their first row), as lists for their centroids on floats.
+        subsets = pair_subsets(scan.size, i, j, max(2, cfg.min_detections))
+        clusters = [s.tolist() for s in subsets]
         centroids: list[tuple[float, float]] = []
         if clusters:
             zx, zy = scan.z[:, 0].tolist(), scan.z[:, 1].tolist()
@@ -704,14 +698,13 @@ class ExtendedTracker:
                 match[best] = cand
         born: list[tuple[ExtendedTrack, np.ndarray]] = []
         ripe: list[tuple[np.ndarray, _Candidate]] = []
-        for k, rows in enumerate(clusters):
-            centroid = centroids[k]
+        for k, centroid in enumerate(centroids):
             cand = match[k]
             run = None if cand is None else cand.seen_again(centroid, t)
             if run is None or math.hypot(*run.slope()) > cfg.max_speed:
                 candidates.append(_Candidate.first(centroid, t))
             elif run.seen >= cfg.birth_scans and t - run.first_time >= BIRTH_MIN_SPAN:
-                ripe.append((np.array(rows, dtype=np.intp), run))
+                ripe.append((subsets[k], run))
             else:
                 candidates.append(run)
         if not ripe:
