@@ -10,11 +10,13 @@ from __future__ import annotations
 import contextlib
 import functools
 import logging
+import re
 import secrets
 import signal
 import subprocess
 import sys
 import threading
+import time
 from collections.abc import AsyncIterator, Sequence
 from pathlib import Path
 from typing import Any
@@ -58,6 +60,12 @@ log = logging.getLogger("service")
 #: the tracker's worker thread is busy (the default is 5 ms).
 SWITCH_INTERVAL = 0.001
 
+#: A client that finds no Zenoh router tries again after this many seconds, doubling up to
+#: ``CONNECT_RETRY_MAX``, and logs a warning at most every ``CONNECT_LOG_INTERVAL`` seconds.
+CONNECT_RETRY_MIN = 0.5
+CONNECT_RETRY_MAX = 5.0
+CONNECT_LOG_INTERVAL = 30.0
+
 
 def _resolve_token(settings: Settings, source: str | None = None) -> str:
     """The bearer token for writes; says on stderr where it came from (a set one is not
@@ -80,6 +88,11 @@ def _resolve_token(settings: Settings, source: str | None = None) -> str:
         flush=True,
     )
     return token
+
+
+def _reason(exc: zenoh.ZError) -> str:
+    """Zenoh's message without the Rust source location it ends with."""
+    return re.sub(r"\s+at \S+\.rs:\d+\.?\s*$", "", str(exc)).strip()
 
 
 class ZenohStartError(RuntimeError):
@@ -149,11 +162,19 @@ class ServiceRuntime:
             if settings.sector:
                 engine.on_report = self.scale_out.after_report
         self.demo: subprocess.Popen[bytes] | None = None
+        #: while a client waits for its router: the last attempt and why it failed
+        self.connecting: str | None = None
         self._lock = threading.Lock()
+        self._started = False
+        self._stopping = threading.Event()
+        self._connector: threading.Thread | None = None
 
     def start(self) -> None:
+        """Start the worker and open Zenoh. A listen endpoint that cannot be opened raises
+        :class:`ZenohStartError`; a client that finds no router keeps trying in the
+        background (``/ready`` says so) and goes on when one answers."""
         with self._lock:
-            if self.zenoh is not None:
+            if self._started:
                 return
             s = self.settings
             sys.setswitchinterval(SWITCH_INTERVAL)
@@ -179,43 +200,96 @@ class ServiceRuntime:
             try:
                 zio.open()
             except zenoh.ZError as exc:
-                self.engine.stop()
-                msg = (
-                    f"cannot open the Zenoh session (mode {s.zenoh_mode}, listen "
-                    f"{','.join(s.zenoh_listen) or 'none'}, connect "
-                    f"{','.join(s.zenoh_connect) or 'none'}): {exc}"
-                )
-                raise ZenohStartError(msg) from None
-            self.engine.sink = zio
-            self.zenoh = zio
-            if s.scale_out and s.zenoh_mode == "peer" and not s.zenoh_listen:
+                if s.zenoh_mode != "client":
+                    self.engine.stop()
+                    raise ZenohStartError(
+                        f"cannot open the Zenoh session (mode {s.zenoh_mode}, listen "
+                        f"{','.join(s.zenoh_listen) or 'none'}, connect "
+                        f"{','.join(s.zenoh_connect) or 'none'}): {exc}"
+                    ) from None
+                self._started = True
+                self.connecting = f"attempt 1: {_reason(exc)}"
                 log.warning(
-                    "scale-out as a Zenoh peer that listens nowhere: the other instances "
-                    "cannot reach this one (federated queries, hand-overs). Connect to the "
-                    "router as a client (zenoh_mode client) or listen on an address they reach"
+                    "no Zenoh router answers at %s (%s); trying again every %.0f s at most "
+                    "until one does (GET /ready says not ready meanwhile)",
+                    ",".join(s.zenoh_connect) or "none",
+                    _reason(exc),
+                    CONNECT_RETRY_MAX,
                 )
-            if s.demo:
-                self._start_demo()
-            log.info(
-                "tracker-service %s ready: instance %s, key prefix %r",
-                __version__,
-                s.instance_id,
-                s.key_prefix,
+                self._connector = threading.Thread(
+                    target=self._keep_connecting, args=(zio,), name="zenoh-connect", daemon=True
+                )
+                self._connector.start()
+                return
+            self._started = True
+            self._connected(zio)
+
+    def _keep_connecting(self, zio: ZenohIO) -> None:
+        """Open ``zio`` until it opens (a client waiting for its router), backing off from
+        :data:`CONNECT_RETRY_MIN` to :data:`CONNECT_RETRY_MAX` seconds; a warning every
+        :data:`CONNECT_LOG_INTERVAL` seconds while it fails. Ends when the runtime stops."""
+        delay, attempt = CONNECT_RETRY_MIN, 1
+        logged = time.monotonic()
+        while not self._stopping.wait(delay):
+            attempt += 1
+            try:
+                zio.open()
+            except zenoh.ZError as exc:
+                self.connecting = f"attempt {attempt}: {_reason(exc)}"
+                if time.monotonic() - logged >= CONNECT_LOG_INTERVAL:
+                    logged = time.monotonic()
+                    log.warning("still no Zenoh router (%s)", self.connecting)
+                delay = min(2.0 * delay, CONNECT_RETRY_MAX)
+                continue
+            with self._lock:
+                if self._stopping.is_set():
+                    zio.close()
+                    return
+                log.info("connected to the Zenoh router after %d attempts", attempt)
+                self._connected(zio)
+            return
+
+    def _connected(self, zio: ZenohIO) -> None:
+        """The session is open: reports go out on it, the demo starts (caller holds the lock)."""
+        s = self.settings
+        self.connecting = None
+        self.engine.sink = zio
+        self.zenoh = zio
+        if s.scale_out and s.zenoh_mode == "peer" and not s.zenoh_listen:
+            log.warning(
+                "scale-out as a Zenoh peer that listens nowhere: the other instances "
+                "cannot reach this one (federated queries, hand-overs). Connect to the "
+                "router as a client (zenoh_mode client) or listen on an address they reach"
             )
+        if s.demo:
+            self._start_demo()
+        log.info(
+            "tracker-service %s ready: instance %s, key prefix %r",
+            __version__,
+            s.instance_id,
+            s.key_prefix,
+        )
 
     def stop(self) -> None:
+        self._stopping.set()
+        connector = self._connector
+        if connector is not None and connector is not threading.current_thread():
+            connector.join(CONNECT_RETRY_MAX + 5.0)
         with self._lock:
-            if self.zenoh is None:
+            if not self._started:
                 return
+            self._started = False
             if self.demo is not None:
                 _stop_process(self.demo)
                 self.demo = None
             # no new batches; the queued ones are tracked and their reports still go out
-            self.zenoh.stop_intake()
+            if self.zenoh is not None:
+                self.zenoh.stop_intake()
             self.engine.view.close()  # end the live view's streams
             self.engine.stop()
-            self.zenoh.close()
-            self.zenoh = None
+            if self.zenoh is not None:
+                self.zenoh.close()
+                self.zenoh = None
             log.info("tracker-service stopped")
 
     def readiness(self) -> dict[str, Any]:
@@ -237,7 +311,12 @@ class ServiceRuntime:
         connected = session is not None and (not must_connect or routers + peers > 0)
         running = self.engine.running
         problems = []
-        if session is None:
+        if session is None and self.connecting is not None:
+            problems.append(
+                "waiting for a Zenoh router (connect "
+                f"{','.join(s.zenoh_connect) or 'none'}; {self.connecting})"
+            )
+        elif session is None:
             problems.append("the Zenoh session is not open")
         elif not connected:
             problems.append(

@@ -326,6 +326,77 @@ def test_zenoh_port_in_use_fails_clearly(processes: list[ServiceProcess]) -> Non
     assert first.terminate()[0] == 0
 
 
+def _router(endpoint: str) -> Any:
+    """A Zenoh router listening on ``endpoint`` (multicast scouting off)."""
+    import json
+
+    import zenoh
+
+    conf = zenoh.Config()
+    conf.insert_json5("mode", '"router"')
+    conf.insert_json5("listen/endpoints", json.dumps([endpoint]))
+    conf.insert_json5("scouting/multicast/enabled", "false")
+    return zenoh.open(conf)
+
+
+def test_client_waits_for_its_router(processes: list[ServiceProcess]) -> None:
+    router_endpoint = f"tcp/127.0.0.1:{free_port()}"
+    svc = _start(
+        processes,
+        "--zenoh-mode",
+        "client",
+        "--zenoh-connect",
+        router_endpoint,
+        "--api-token",
+        "x",
+        "--log-level",
+        "info",
+    )
+    # no router yet: the service runs, answers, and says what it waits for
+    time.sleep(1.0)
+    assert svc.proc.poll() is None
+    r = httpx.get(svc.url + "/ready", timeout=5)
+    assert r.status_code == 503
+    assert "waiting for a Zenoh router" in r.json()["detail"]
+    assert router_endpoint in r.json()["detail"]
+    router = _router(router_endpoint)
+    try:
+        wait_until(
+            lambda: httpx.get(svc.url + "/ready", timeout=5).status_code == 200,
+            timeout=15,
+            what="the service to reach the router",
+        )
+        session = open_peer(router_endpoint)
+        try:
+            reports = Collector(session, "tracking/tracks")
+            pub = declare_publisher(session, "tracking/detections/radar-1")
+            for scan in simulate(reference_scenario(0))[:3]:
+                pub.put(orjson.dumps(scan.to_batch()))
+            reports.wait_for(3)
+            pub.undeclare()
+            reports.close()
+        finally:
+            session.close()
+        code, _, _, err = svc.terminate()
+    finally:
+        router.close()
+    assert code == 0, err
+    assert "no Zenoh router answers" in err
+    assert "connected to the Zenoh router" in err
+    assert "Traceback" not in err
+
+
+def test_client_waiting_for_its_router_stops_cleanly(processes: list[ServiceProcess]) -> None:
+    svc = _start(
+        processes, "--zenoh-mode", "client", "--zenoh-connect", f"tcp/127.0.0.1:{free_port()}"
+    )
+    time.sleep(1.5)
+    code, elapsed, _, err = svc.terminate()
+    assert code == 0, err
+    assert elapsed < 4.0
+    assert "Traceback" not in err
+
+
 def test_demo_shows_tracks_at_once(processes: list[ServiceProcess]) -> None:
     svc = _start(
         processes,
