@@ -25,7 +25,11 @@ sensor's batch; several sensors' batches come one after another, each with its o
    predictions follow), and the better match kept.
 4. **Update** (section III.C). Each matched member's IMM is updated with its detection when it
    lies inside the member's gate; the members share one mode probability, the product of
-   their modes' likelihoods with the shared prediction (:func:`_shared_modes`). A member's
+   their modes' likelihoods with the shared prediction, less a member whose likelihoods
+   disagree with the others' (:func:`_shared_modes`). A member missed while the others
+   were seen looks once more, as a manoeuvring lone track, among the detections no member's
+   gate holds; one found so flies off on its own: it is updated with that detection and
+   handed back (:func:`_departures`). A member's
    score gains ``ln(P_D Λ / λ)``, a missed member's ``ln(1 − P_D)``. The formation claims
    its matched detections and every other detection in a member's gate, so none of them
    starts an individual track.
@@ -48,6 +52,7 @@ from functools import lru_cache
 import numpy as np
 
 from trackers.association.gating import inverse_2x2, max_eigenvalue_2x2
+from trackers.association.manoeuvre import manoeuvre_search
 from trackers.association.spatial import pairs_within
 from trackers.config import FormationConfig, MotionConfig, TrackerConfig
 from trackers.extended.partition import component_labels
@@ -71,6 +76,10 @@ KIND = "formation"
 #: leaves members unmatched: a formation turning or opening up faster than predicted.
 _TURNS = (0.05, -0.05, 0.1, -0.1, 0.2, -0.2)
 _SCALES = (0.9, 1.1)
+
+#: A member whose modes' log-likelihood ratios differ by more than this from the other
+#: members' median keeps its own mode probabilities (:func:`_shared_modes`): ln 20.
+MODE_OUTLIER = math.log(20.0)
 
 #: How far beyond a formation's outermost member its detections are first looked for (m);
 #: the members' gates then decide.
@@ -100,6 +109,8 @@ class Formation:
     updated: np.ndarray
     leaving: np.ndarray
     detection_ids: tuple[tuple[str, ...], ...]
+    #: Members found flying off on their own this scan (:func:`_departures`), handed back.
+    departed: np.ndarray
     started: float
     last_update: float
     scans: int = 0
@@ -130,6 +141,7 @@ class Formation:
             updated=np.concatenate([self.updated, new.updated]),
             leaving=np.concatenate([self.leaving, new.leaving]),
             detection_ids=self.detection_ids + new.detection_ids,
+            departed=np.concatenate([self.departed, new.departed]),
         )
 
     def take(self, keep: np.ndarray) -> Formation:
@@ -147,6 +159,7 @@ class Formation:
             updated=self.updated[idx],
             leaving=self.leaving[idx],
             detection_ids=tuple(self.detection_ids[i] for i in idx.tolist()),
+            departed=self.departed[idx],
         )
 
 
@@ -232,6 +245,7 @@ def _new_formation(
         updated=view.updated[idx].copy(),
         leaving=np.full(n, np.nan),
         detection_ids=((),) * n,
+        departed=np.zeros(n, dtype=bool),
         started=view.time,
         last_update=float(view.updated[idx].max()),
     )
@@ -618,6 +632,7 @@ def _update(
     x_all = np.concatenate([f.x for f in formations])
     P_all = np.concatenate([f.P for f in formations])
     mu_all = np.concatenate([f.mu for f in formations])
+    c_bar = mu_all.copy()
     score = np.concatenate([f.score for f in formations]) + math.log1p(-min(pd, 1.0 - 1e-12))
     hits = np.concatenate([f.hits for f in formations])
     updated = np.concatenate([f.updated for f in formations])
@@ -636,13 +651,39 @@ def _update(
         )
         shared = _shared_modes(mu_all, muu, r, starts)
         x_all[r], P_all[r], mu_all[r] = xu, Pu, muu
-        for sl, mu_f in shared:
+        own_mu = mu_all.copy()
+        for sl, mu_f, own in shared:
             mu_all[sl] = mu_f
+            mu_all[own] = own_mu[own]
         score[r] += math.log(pd) - math.log1p(-min(pd, 1.0 - 1e-12)) + ll - math.log(lam)
         hits[r] += 1
         updated[r] = scan.time
         hit[r] = True
         for row, det in zip(r.tolist(), d.tolist(), strict=True):
+            det_ids[row] = (scan.detection_ids[det],) if scan.detection_ids else ()
+    departed = np.zeros(len(x_all), dtype=bool)
+    seen = np.zeros(len(x_all), dtype=bool)
+    for i in range(len(formations)):
+        sl = slice(int(starts[i]), int(starts[i + 1]))
+        seen[sl] = hit[sl].any()
+    found = _departures(
+        np.flatnonzero(seen & ~hit),
+        np.flatnonzero(~claimed),
+        (x_all, P_all, c_bar, combined, np.concatenate([f.updated for f in formations])),
+        scan,
+        config,
+        pd,
+        lam,
+    )
+    if found is not None:
+        rows, dets, fx, fP, fmu, gain = found
+        x_all[rows], P_all[rows], mu_all[rows] = fx, fP, fmu
+        score[rows] += gain - math.log1p(-min(pd, 1.0 - 1e-12))
+        hits[rows] += 1
+        updated[rows] = scan.time
+        hit[rows] = departed[rows] = True
+        claimed[dets] = True
+        for row, det in zip(rows.tolist(), dets.tolist(), strict=True):
             det_ids[row] = (scan.detection_ids[det],) if scan.detection_ids else ()
     out: list[Formation] = []
     for i, f in enumerate(formations):
@@ -651,6 +692,7 @@ def _update(
         out.append(
             replace(
                 f,
+                departed=departed[sl],
                 x=x_all[sl],
                 P=P_all[sl],
                 mu=mu_all[sl],
@@ -665,9 +707,55 @@ def _update(
     return out, claimed
 
 
+def _departures(
+    missed: np.ndarray,
+    free: np.ndarray,
+    members: tuple[np.ndarray, np.ndarray, np.ndarray, list, np.ndarray],
+    scan: Scan,
+    config: TrackerConfig,
+    pd: float,
+    lam: float,
+) -> tuple[np.ndarray, ...] | None:
+    """Members flying off on their own. A member ``missed`` (rows of the formations' stacked
+    members) at a scan in which its formation was seen may have turned away, out of its gate
+    and of the formation's motion: it looks once more, as a lone confirmed track does, among
+    the ``free`` detections (those in no member's gate), under the hypothesis that it
+    manoeuvred since its last update (:func:`~trackers.association.manoeuvre.manoeuvre_search`
+    with the individual tracker's gate and straight-flight sojourn time). ``members``: every
+    member's predicted mode states ``x``, ``P`` and probabilities ``c̄``, the formations'
+    combined estimates and the members' last detection times. Returns the rows that found
+    their detection, those detections (scan rows), the rows' IMM posteriors ``x``, ``P``,
+    ``μ`` and score increments, or ``None``; such a member is then handed back."""
+    if missed.size == 0 or free.size == 0:
+        return None
+    x, P, c_bar, combined, updated = members
+    gating = config.gating
+    xc = np.concatenate([c[0] for c in combined])
+    Pc = np.concatenate([c[1] for c in combined])
+    found = manoeuvre_search(
+        x[missed],
+        P[missed],
+        c_bar[missed],
+        xc[missed],
+        Pc[missed],
+        scan.time - updated[missed],
+        scan.z[free],
+        scan.R[free],
+        np.full(missed.size, pd),
+        lam,
+        a_max=gating.manoeuvre_acceleration,
+        omega_max=gating.manoeuvre_turn_rate,
+        straight_sojourn=config.motion.sojourn_times[0],
+        gamma=gating.threshold,
+    )
+    if found is None:
+        return None
+    return missed[found.track], free[found.detection], found.x, found.P, found.mu, found.hit
+
+
 def _shared_modes(
     c_bar: np.ndarray, mu: np.ndarray, rows: np.ndarray, starts: np.ndarray
-) -> list[tuple[slice, np.ndarray]]:
+) -> list[tuple[slice, np.ndarray, np.ndarray]]:
     """One mode probability vector per formation with a member updated: a formation flies as
     one body, so its members are in the same mode, and every member's detection is evidence
     for it. With ``c̄`` the members' predicted mode probabilities (shared, so their mean) and
@@ -675,20 +763,30 @@ def _shared_modes(
 
         μ_f ∝ c̄ Π_i Λ_i = c̄ Π_i (μ_i / c̄_i)
 
-    floored at :data:`~trackers.filters.imm.MU_FLOOR`. Returns (the formation's rows,
-    ``μ_f``) for each formation with an updated member (``starts``: the first row of each)."""
-    out: list[tuple[slice, np.ndarray]] = []
+    floored at :data:`~trackers.filters.imm.MU_FLOOR`. A member that does not move with the
+    others (one turning away from a formation flying straight) would carry them all into its
+    mode: with three or more updated, a member whose log-likelihood ratios between the modes,
+    ``ln Λ_i(m) − ln Λ_i(0)``, differ from the members' median by more than
+    :data:`MODE_OUTLIER` (natural log) for some mode is left out of the product and keeps its
+    own ``μ_i``. Returns (the formation's rows, ``μ_f``, the rows of those left out) for each
+    formation with an updated member (``starts``: the first row of each)."""
+    out: list[tuple[slice, np.ndarray, np.ndarray]] = []
     log_ratio = np.log(np.maximum(mu, MU_FLOOR)) - np.log(np.maximum(c_bar[rows], MU_FLOOR))
     for i in range(len(starts) - 1):
         lo, hi = int(starts[i]), int(starts[i + 1])
-        sel = (rows >= lo) & (rows < hi)
-        if not sel.any():
+        sel = np.flatnonzero((rows >= lo) & (rows < hi))
+        if sel.size == 0:
             continue
+        own = sel[:0]
+        if sel.size >= 3:
+            rel = log_ratio[sel] - log_ratio[sel, :1]
+            apart = (np.abs(rel - np.median(rel, axis=0)) > MODE_OUTLIER).any(axis=1)
+            own, sel = sel[apart], sel[~apart]
         prior = np.maximum(c_bar[lo:hi].mean(axis=0), MU_FLOOR)
         log_mu = np.log(prior) + log_ratio[sel].sum(axis=0)
         w = np.exp(log_mu - log_mu.max())
         w = np.maximum(w / w.sum(), MU_FLOOR)
-        out.append((slice(lo, hi), w / w.sum()))
+        out.append((slice(lo, hi), w / w.sum(), rows[own]))
     return out
 
 
@@ -697,6 +795,7 @@ def _missed(f: Formation, pd: float) -> Formation:
         f,
         score=f.score + math.log1p(-min(pd, 1.0 - 1e-12)),
         detection_ids=((),) * len(f),
+        departed=np.zeros(len(f), dtype=bool),
     )
 
 
@@ -750,6 +849,7 @@ def _leaving(f: Formation, cfg: FormationConfig, t: float) -> tuple[Formation, n
         apart |= d.min(axis=1) > cfg.leave_distance
     since = np.where(apart, np.where(np.isnan(f.leaving), t, f.leaving), np.nan)
     out = (apart & (t - since >= cfg.leave_time)) | (t - f.updated > cfg.max_coast_time)
+    out |= f.departed
     return replace(f, leaving=since), out
 
 
@@ -808,10 +908,9 @@ def _moving_together(
     d_res = config.extended.resolution_distance
     out: dict[tuple[str, ...], tuple[float, int]] = {}
     ripe: list[list[int]] = []
-    for g in np.unique(labels).tolist():
+    # Only the groups large enough are looked at (most tracks are alone: one label each).
+    for g in np.flatnonzero(np.bincount(labels) >= cfg.min_members).tolist():
         local = np.flatnonzero(labels == g)
-        if local.size < cfg.min_members:
-            continue
         d = _distances(p[local])
         np.fill_diagonal(d, np.inf)
         if d.min() < d_res:

@@ -24,10 +24,12 @@ from trackers.formation.tracker import (
     _moving_together,
     _new_formation,
     _shared_modes,
+    _update,
     member_motion,
 )
 from trackers.peers import PointTrackView
 from trackers.pipeline import TrackingPipeline
+from trackers.types import Scan
 
 ON = TrackerConfig().merged({"formation": {"enabled": True}})
 
@@ -130,7 +132,7 @@ def test_a_formations_members_share_one_mode_probability() -> None:
     c_bar = np.array([[0.9, 0.1]] * 3 + [[0.5, 0.5]] * 2)  # formation 0: rows 0-2; 1: 3-4
     mu = np.array([[0.6, 0.4], [0.7, 0.3]])  # the posteriors of rows 0 and 2
     out = _shared_modes(c_bar, mu, np.array([0, 2]), np.array([0, 3, 5]))
-    assert len(out) == 1 and out[0][0] == slice(0, 3)
+    assert len(out) == 1 and out[0][0] == slice(0, 3) and out[0][2].size == 0
     w = np.array([0.9, 0.1]) * (mu[0] / c_bar[0]) * (mu[1] / c_bar[2])
     np.testing.assert_allclose(out[0][1], w / w.sum())
     assert out[0][1][1] > 0.7  # two members' evidence for the turn mode outweighs the prior
@@ -202,6 +204,53 @@ def test_a_member_that_turns_away_is_handed_back_under_its_id() -> None:
     mine = [t for t in result.confirmed() if t.id == member_of_leaver]
     assert mine and mine[0].formation_id is None and mine[0].kind == "individual"
     assert np.hypot(*(np.array(mine[0].position) - sim.truth_states[3, :2])) < 300.0
+
+
+@pytest.mark.parametrize("displaced", [True, False])
+def test_a_member_whose_detection_left_its_gate_is_found_and_handed_back(displaced: bool):
+    """Three members flying straight at 250 m/s; the third last detected 4 s ago. Its
+    detection lies 150 m across its track, out of its gate (the formation flies straight) but
+    within the reach of a turn since then: the formation's second look, as a manoeuvring lone
+    track, finds it, updates the member with it and marks it departed (handed back). A member
+    merely missed, with nothing there, stays."""
+    t = 10.0
+    view = _view([(0.0, 0.0), (300.0, 0.0), (600.0, 0.0)], (250.0, 0.0), t=t)
+    view = dataclasses.replace(view, updated=np.array([t, t, t - 4.0]))
+    f = _new_formation("F1", [0, 1, 2], view, ON)
+    z = [[0.0, 0.0], [300.0, 0.0]] + ([[600.0, 150.0]] if displaced else [])
+    n = len(z)
+    scan = Scan(
+        sensor_id="r",
+        time=t,
+        z=np.array(z),
+        R=np.tile(np.eye(2) * 400.0, (n, 1, 1)),
+        detection_ids=tuple(f"d{i}" for i in range(n)),
+    )
+    (out,), claimed = _update([f], scan, ON, 0.9, 1e-6)
+    assert claimed.all()
+    assert out.departed.tolist() == [False, False, displaced]
+    x, _ = out.combined()
+    if displaced:
+        assert out.updated[2] == t and out.detection_ids[2] == ("d2",)
+        assert 100.0 < x[2, 1] <= 150.0  # moved to its detection
+        assert x[2, 3] > 20.0  # and turned towards it
+    else:
+        assert out.updated[2] == t - 4.0
+
+
+def test_a_member_turning_alone_does_not_turn_its_formation() -> None:
+    """Three members' modes (constant velocity, turn): two mildly for flying straight, one
+    strongly for a turn. The one is left out of the shared product and keeps its own μ."""
+    c_bar = np.array([[0.9, 0.1]] * 3)
+    mu = np.array([[0.93, 0.07], [0.92, 0.08], [0.05, 0.95]])
+    ((sl, mu_f, own),) = _shared_modes(c_bar, mu, np.array([0, 1, 2]), np.array([0, 3]))
+    assert sl == slice(0, 3) and own.tolist() == [2]
+    w = np.array([0.9, 0.1]) * (mu[0] / c_bar[0]) * (mu[1] / c_bar[1])
+    np.testing.assert_allclose(mu_f, w / w.sum())
+    # all three turning: one body, every member's evidence counts
+    turning = np.array([[0.1, 0.9], [0.15, 0.85], [0.05, 0.95]])
+    ((_, mu_f, own),) = _shared_modes(c_bar, turning, np.array([0, 1, 2]), np.array([0, 3]))
+    assert own.size == 0 and mu_f[1] > 0.999
 
 
 def test_a_formation_asked_for_by_ids_is_formed_at_the_next_scan() -> None:
