@@ -41,7 +41,12 @@ from trackers.filters.imm import (
     imm_update,
     transition_matrix,
 )
-from trackers.initiation import MIN_PAIR_INTERVAL, Candidates, pair_candidates
+from trackers.initiation import (
+    MIN_PAIR_INTERVAL,
+    Candidates,
+    next_hit_allowance,
+    pair_candidates,
+)
 from trackers.models.measurement import H_POSITION, MIN_RANGE, range_rate_innovation
 from trackers.models.motion import STATE_DIM, build_models
 from trackers.peers import PointDirectives, PointProposal, PointTrackState, PointTrackView
@@ -477,8 +482,12 @@ class IndividualTracker:
         track claims (see :meth:`_update_existing`); each pair kept starts a tentative track
         holding two detections. A pair on a detection that a tentative track took must score
         higher than that track: the target's own start is then not lost to a weaker track
-        that crossed its path, and the two compete for the next detection. Every free
-        detection becomes a candidate. Returns the new tracks and the candidates to keep."""
+        that crossed its path, and the two compete for the next detection. A pair must score
+        above the deletion threshold, or, at its candidate's first scan (opened at the scan
+        before), above it less the increment a third detection is expected to bring
+        (:func:`~trackers.initiation.next_hit_allowance`): a fast target at a long revisit
+        then starts, and is kept or dropped at its third scan. Every free detection becomes a
+        candidate. Returns the new tracks and the candidates to keep."""
         init, tm = config.initiation, config.track_management
         t = float(scan.time)
         cand = self._state.candidates
@@ -500,6 +509,18 @@ class IndividualTracker:
             min_score=np.maximum(claims, tm.delete_threshold),
             group_fraction=init.group_fraction,
             group_velocity_std=init.group_velocity_std,
+            allowance=next_hit_allowance(
+                cand,
+                cand.time == self._state.time,
+                scan.z,
+                claims < np.inf,
+                t,
+                pd=pd,
+                clutter_density=lam_fa,
+                max_speed=init.max_speed,
+                slow_fraction=init.slow_target_fraction,
+                floor=tm.delete_threshold,
+            ),
         )
         born = _new_tracks(
             config,

@@ -61,6 +61,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.spatial import cKDTree
 
 from trackers.association.gating import max_eigenvalue_2x2
 from trackers.association.spatial import BRUTE_FORCE_CELLS, pairs_within
@@ -69,10 +70,15 @@ from trackers.rows import RowArrays, sort_within_groups
 __all__ = [
     "Candidates",
     "TwoPointTracks",
+    "next_hit_allowance",
     "pair_candidates",
     "search_radius",
     "two_point_estimate",
 ]
+
+#: A candidate whose reach holds fewer free detections than this fraction of what the clutter
+#: density predicts may start pairs below the deletion threshold (:func:`next_hit_allowance`).
+SPARSE_FRACTION = 0.2
 
 #: Candidates and detections less than this far apart in time (s) are not paired: they say
 #: nothing about velocity (two sensors' scans at the same instant).
@@ -412,6 +418,78 @@ def _mixture_state(
     return mix[:4].T.copy(), mix.take(_P_ROWS, axis=0).T.copy().reshape(k, 4, 4)
 
 
+def next_hit_allowance(
+    candidates: Candidates,
+    fresh: np.ndarray,
+    z: np.ndarray,
+    free: np.ndarray,
+    t: float,
+    *,
+    pd: float,
+    clutter_density: float,
+    max_speed: float,
+    slow_fraction: float,
+    floor: float,
+) -> np.ndarray:
+    """How far below ``floor`` (the deletion threshold) the pairs of each candidate may score
+    and still start a track (0 for most): the score a third detection at the next revisit is
+    expected to add,
+
+        h = max(0, ln(P_D / (2π √|S| λ_fa)) − 1),   S ≈ 4 R_c,
+
+    ``S`` the innovation covariance of a two-point track one revisit on (its position, a
+    velocity from two points as uncertain as both, and the third detection's noise, each
+    about the candidate's ``R_c``) and ``−1`` the mean of ``−χ²₂/2``.
+
+    A pair's own score says whether two detections this far apart are likelier a target
+    than clutter. At a long revisit the fast prior is spread over ``π (v_max Δt)²`` and the
+    pair of a real fast target can fall below the threshold (a 250 m/s target every 4 s with
+    λ_fa 1e-6 per m², the density assumed when a batch states none) although its third
+    detection would lift it above; the test then decides one scan later. That is allowed
+    only where it costs little and the density looks overstated: for a candidate at its
+    first scan (``fresh``), whose fast pairs cannot pass ``floor`` without it, and around
+    which fewer ``free`` detections of ``z`` lie within its reach ``v_max Δt`` than
+    :data:`SPARSE_FRACTION` of the ``λ_fa π (v_max Δt)²`` that the density predicts (a
+    fifth: a candidate at the edge or corner of a uniformly cluttered area sees a half or a
+    quarter). In clutter as dense as assumed nothing changes (and when the scan's free
+    detections are that dense over the rectangle they span, no candidate is looked at), and
+    the extra tentative tracks are at most the few detections in reach."""
+    out = np.zeros(candidates.time.size)
+    dt = t - candidates.time
+    reach = max_speed * np.maximum(dt, MIN_PAIR_INTERVAL)
+    # The best a fast pair can score: the candidate's score and ln(P_D ḡ_f / λ_fa).
+    fast = candidates.score + np.log(
+        pd * (1.0 - slow_fraction) / (math.pi * reach * reach * clutter_density)
+    )
+    need = np.flatnonzero(
+        np.asarray(fresh, dtype=bool) & (dt >= MIN_PAIR_INTERVAL) & (fast <= floor)
+    )
+    if need.size == 0:
+        return out
+    R = candidates.R.take(need, axis=0)
+    det = np.maximum(R[:, 0, 0] * R[:, 1, 1] - R[:, 0, 1] * R[:, 1, 0], 1e-300)
+    h = math.log(pd / (8.0 * math.pi * clutter_density)) - 0.5 * np.log(det) - 1.0
+    keep = h > 0.0
+    need, h = need[keep], h[keep]
+    if need.size == 0:
+        return out
+    r = reach.take(need)
+    expected = clutter_density * math.pi * r * r
+    points = z.take(np.flatnonzero(free), axis=0)
+    n = points.shape[0]
+    if n < SPARSE_FRACTION * float(expected.min()):
+        sparse = np.ones(need.size, dtype=bool)  # fewer in the whole scan
+    elif n > SPARSE_FRACTION * clutter_density * float(np.prod(np.ptp(points, axis=0))):
+        return out  # the scan is as dense as assumed over the area it spans
+    else:
+        count = cKDTree(points).query_ball_point(
+            candidates.z.take(need, axis=0), r, return_length=True
+        )
+        sparse = count < SPARSE_FRACTION * expected
+    out[need[sparse]] = h[sparse]
+    return out
+
+
 def search_radius(
     dt: np.ndarray,
     base: np.ndarray,
@@ -470,12 +548,14 @@ def pair_candidates(
     min_score: float | np.ndarray = -math.inf,
     group_fraction: float = 0.0,
     group_velocity_std: float = 1.0,
+    allowance: np.ndarray | None = None,
 ) -> TwoPointTracks:
     """Every (candidate, free detection) pair a target no faster than ``max_speed`` could
     make, at most ``max_pairs`` per candidate (the highest scores), with the two-point state
     and the score ``L = L_c + ln(P_D g₂ / λ_fa)``; pairs with ``L ≤ min_score`` (a number,
     such as the deletion threshold of the sequential test, or one per detection of ``z``)
-    are left out. Detections are indexed into ``z``.
+    are left out; a candidate's pairs may score ``allowance`` below it (one number per
+    candidate, 0 by default; :func:`next_hit_allowance`). Detections are indexed into ``z``.
 
     The velocity gate of the module docstring is ``ρ² dᵀ (R_c + R_j)⁻¹ d ≤ γ`` with
     ``ρ = max(0, 1 − v_max Δt / |d|)``: the part of ``d`` beyond the reach of ``v_max``.
@@ -503,10 +583,12 @@ def pair_candidates(
     )
     cz, cR, dt_c, base = candidates.z, candidates.R, dt_all, candidates.score
     vg = candidates.group_velocity
+    allow = np.zeros(dt_all.size) if allowance is None else np.asarray(allowance, dtype=float)
     if n_c < dt_all.size:
         cz, cR = cz.take(offered, axis=0), cR.take(offered, axis=0)
         dt_c, base = dt_c.take(offered), base.take(offered)
         vg = vg.take(offered, axis=0)
+        allow = allow.take(offered)
     grouped = group_fraction > 0.0 and bool(np.isfinite(vg).all(axis=1).any())
     if grouped:
         group = dict(group_fraction=group_fraction, group_velocity_std=group_velocity_std)
@@ -532,7 +614,7 @@ def pair_candidates(
         best_c = np.maximum.reduce(score, axis=1, keepdims=True)
         best_d = np.maximum.reduce(score, axis=0)
         good = (
-            (score > floor)
+            (score + allow[:, None] > floor)
             & (score >= best_c - PAIR_PRUNE_LOG_RATIO)
             & (score >= best_d - PAIR_PRUNE_LOG_RATIO)
         )
@@ -542,7 +624,7 @@ def pair_candidates(
         T, cols = T.reshape(_ROWS, -1), ci * n_f + fj
     else:
         ci, fj, T, cols = _searched_pairs(
-            cz, cR, dt_c, base, zf, Rf, floor, vg if grouped else None, group, **kw
+            cz, cR, dt_c, base, zf, Rf, floor, vg if grouped else None, group, allow, **kw
         )
         if ci.size == 0:
             return _no_pairs()
@@ -573,11 +655,13 @@ def _searched_pairs(
     floor: float | np.ndarray,
     vg: np.ndarray | None,
     group: dict[str, float],
+    allow: np.ndarray,
     **kw: float,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """The pairs of :func:`pair_candidates` in a large problem: each candidate ``i`` (``cz``,
     ``cR``, ``dt``, ``base`` its rows) searches the free detections ``j`` (``zf``, ``Rf``,
-    ``floor`` a number or theirs) within :func:`search_radius`, or within the whole velocity
+    ``floor`` a number or theirs, less the candidate's ``allow``) within
+    :func:`search_radius`, or within the whole velocity
     gate for a candidate with a group velocity (``vg``, NaN: none; ``group`` the weight and
     spread of the group component, empty without one). Returns ``i`` and ``j`` (by
     candidate, then detection) of the pairs that pass the floor and the pruning of rivals,
@@ -585,7 +669,7 @@ def _searched_pairs(
     empty = np.zeros(0, dtype=np.intp)
     none = empty, empty, np.zeros((_ROWS, 0)), empty
     noise = max_eigenvalue_2x2(cR) + float(max_eigenvalue_2x2(Rf).max())
-    radius = search_radius(dt, base, noise, float(np.min(floor)), **kw)
+    radius = search_radius(dt, base + allow, noise, float(np.min(floor)), **kw)
     if vg is not None:  # the group term can pass anywhere in the velocity gate
         grouped = np.isfinite(vg).all(axis=1)
         radius[grouped] = kw["max_speed"] * dt[grouped] + np.sqrt(kw["gamma"] * noise[grouped])
@@ -617,7 +701,7 @@ def _searched_pairs(
     np.maximum.at(best_d, fj, score)
     f = floor if np.ndim(floor) == 0 else floor.take(fj)
     good = (
-        (score > f)
+        (score + allow.take(ci) > f)
         & (score >= best_c - PAIR_PRUNE_LOG_RATIO)
         & (score >= best_d[fj] - PAIR_PRUNE_LOG_RATIO)
     ).nonzero()[0]

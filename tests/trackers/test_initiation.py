@@ -441,3 +441,46 @@ def test_small_problems_score_every_pair_with_the_same_result_as_the_search(
             np.testing.assert_array_equal(getattr(small, field), getattr(searched, field))
         kept += small.size
     assert kept > 0 or floor == 0.0
+
+
+ALLOWANCE = dict(pd=0.9, clutter_density=1e-6, max_speed=700.0, slow_fraction=0.8, floor=-6.9)
+
+
+def test_a_fresh_candidate_in_sparse_surroundings_may_fall_short_by_a_third_hit():
+    """h = ln(P_D / (2π √|4 R_c| λ)) − 1 for a candidate at its first scan whose fast pairs
+    cannot pass the floor (Δt = 4 s: ln(P_D ḡ_f / λ) = −4.9) and around which fewer
+    detections lie than half of what λ predicts within its reach (2.8 km: 24.6); else 0."""
+    cand = candidates_at([[0.0, 0.0], [0.0, 0.0], [0.0, 0.0]], variance=900.0)
+    cand = replace(cand, score=np.full(3, -2.3))
+    fresh = np.array([True, False, True])
+    z = np.array([[1000.0, 0.0], [50_000.0, 0.0]])
+    h = initiation.next_hit_allowance(cand, fresh, z, np.ones(2, bool), 4.0, **ALLOWANCE)
+    expected = math.log(0.9 / (2 * math.pi * 4 * 900.0 * 1e-6)) - 1.0
+    np.testing.assert_allclose(h, [expected, 0.0, expected])
+    # a detection-rich neighbourhood: as dense as assumed, no allowance
+    dense = np.random.default_rng(0).uniform(-2000.0, 2000.0, (60, 2))
+    h = initiation.next_hit_allowance(cand, fresh, dense, np.ones(60, bool), 4.0, **ALLOWANCE)
+    assert (h == 0.0).all()
+    # at a short revisit its fast pairs pass by themselves: no allowance needed
+    h = initiation.next_hit_allowance(cand, fresh, z, np.ones(2, bool), 1.0, **ALLOWANCE)
+    assert (h == 0.0).all()
+
+
+@pytest.mark.parametrize("period", [4.0, 8.0])
+def test_fast_targets_at_a_long_revisit_start_without_a_stated_clutter_density(period):
+    """Three aircraft at 250-450 m/s, 400 m apart, one radar every 4 or 8 s, 30 m noise, no
+    clutter density in the scans (the configured 1e-6 per m² applies): each gets a confirmed
+    track. Before, every pair scored below the deletion threshold (the fast prior spread
+    over π (v_max Δt)²) and no track ever started."""
+    rng = np.random.default_rng(5)
+    v = np.array([[0.0, 250.0], [0.0, 350.0], [0.0, 450.0]])
+    p0 = np.array([[20000.0, 5000.0], [20400.0, 5100.0], [20800.0, 5200.0]])
+    tr = IndividualTracker(TrackerConfig())
+    for k in range(16):
+        pts = p0 + v * period * k + rng.normal(0.0, 30.0, (3, 2))
+        res = tr.step(replace(scan_at(period * k, pts, sigma=30.0), clutter_density=None))
+    conf = res.confirmed()
+    truth = p0 + v * period * 15
+    assert len(conf) == 3
+    for t in conf:
+        assert np.hypot(*(truth - np.array(t.position)).T).min() < 100.0
