@@ -157,7 +157,8 @@ def time_jump_detail(
         why += f" plus the {window:g} s reorder window"
     return (
         f"time {batch_time} is {batch_time - last:.6g} s after the last processed time {last}: "
-        f"more than {why} plus the {waited:.3g} s of wall time since"
+        f"more than {why} plus the {waited:.3g} s of wall time since (if this sensor's clock "
+        "is right, raise ingest.max_time_jump: PATCH /api/v1/config)"
     )
 
 
