@@ -66,6 +66,9 @@ T = TypeVar("T")
 
 log = logging.getLogger("service.engine")
 
+#: Sensors told at most once each that detections without a covariance get position_std.
+MAX_NO_COV_NOTES = 1024
+
 
 class _Stop:
     pass
@@ -208,6 +211,8 @@ class Engine:
         self._queued_bytes = 0  # payload bytes in the queue
         self._bytes_free = threading.Condition()
         self._recent = RecentBatches()
+        #: sensors already told that detections without a covariance get position_std
+        self._no_cov_sensors: set[str] = set()
         self._clocks = SensorClocks()  # each sensor's usual interval, for the time-jump guard
         self._stop_drain_seconds = stop_drain_seconds
         self._state = ReportState.empty()
@@ -811,6 +816,21 @@ class Engine:
             return
         self._process(item, batch)
 
+    def _note_missing_covariance(self, batch: DetectionBatchIn, position_std: float) -> None:
+        """Say once per sensor that its detections without a ``cov`` are taken as
+        ``position_std`` per axis: a sensor noisier than that is tracked badly, silently."""
+        sensor = batch.sensor_id
+        if sensor in self._no_cov_sensors or all(d.get("cov") for d in batch.detections):
+            return
+        self._no_cov_sensors.add(sensor)
+        log.warning(
+            "sensor %s sends detections without a covariance: measurement.position_std = %g m "
+            "per axis is assumed for them (send cov, per batch or per detection, or set "
+            "measurement.position_std to the sensor's noise)",
+            sensor,
+            position_std,
+        )
+
     def _forget(self, item: Item, batch: DetectionBatchIn) -> None:
         """A batch accepted, then refused by the tracker, is no duplicate if it comes again."""
         if item.digest is not None:
@@ -821,6 +841,8 @@ class Engine:
         self._take_handed()
         try:
             scan = batch_to_scan(batch, pipeline.config.measurement.position_std)
+            if batch.cov is None and len(self._no_cov_sensors) < MAX_NO_COV_NOTES:
+                self._note_missing_covariance(batch, pipeline.config.measurement.position_std)
             t0 = time.perf_counter()
             result = pipeline.process(scan)
             ms = (time.perf_counter() - t0) * 1000.0

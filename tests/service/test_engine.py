@@ -297,3 +297,24 @@ def test_a_failing_peer_is_an_internal_error_naming_it_and_changes_no_track(
         assert eng.seq == 4 and peer.committed == 4
     finally:
         eng.stop()
+
+
+def test_a_sensor_without_covariances_is_told_once_what_is_assumed(
+    engine: Engine, caplog: pytest.LogCaptureFixture
+) -> None:
+    def batch(sensor: str, t: float, cov: bool) -> bytes:
+        det: dict[str, Any] = {"x": 100.0 * t, "y": 0.0}
+        if cov:
+            det["cov"] = [[25.0, 0.0], [0.0, 25.0]]
+        return orjson.dumps({"sensor_id": sensor, "time": t, "detections": [det]})
+
+    with caplog.at_level("WARNING", logger="service.engine"):
+        run_batches(
+            engine,
+            [batch("plain", 1.0, False), batch("plain", 2.0, False), batch("covs", 3.0, True)],
+            key=None,
+        )
+    notes = [r.getMessage() for r in caplog.records if "without a covariance" in r.getMessage()]
+    assert len(notes) == 1
+    assert notes[0].startswith("sensor plain sends detections without a covariance")
+    assert "measurement.position_std = 10 m" in notes[0]
