@@ -452,18 +452,26 @@ def next_hit_allowance(
     :data:`SPARSE_FRACTION` of the ``λ_fa π (v_max Δt)²`` that the density predicts (a
     fifth: a candidate at the edge or corner of a uniformly cluttered area sees a half or a
     quarter). In clutter as dense as assumed nothing changes (and when the scan's free
-    detections are that dense over the rectangle they span, no candidate is looked at), and
+    detections are that dense over the square on the longer side of the rectangle they span,
+    no candidate is looked at; a line of aircraft on one airway spans no area), and
     the extra tentative tracks are at most the few detections in reach."""
     out = np.zeros(candidates.time.size)
+    fresh = np.asarray(fresh, dtype=bool)
+    if not fresh.any():
+        return out
+    # The fresh candidates opened at one scan: when the lowest-scored of them passes, all do.
+    dt0 = t - float(candidates.time[fresh].max())
+    if dt0 >= MIN_PAIR_INTERVAL:
+        g0 = pd * (1.0 - slow_fraction) / (math.pi * (max_speed * dt0) ** 2 * clutter_density)
+        if float(candidates.score[fresh].min()) + math.log(g0) > floor:
+            return out
     dt = t - candidates.time
     reach = max_speed * np.maximum(dt, MIN_PAIR_INTERVAL)
     # The best a fast pair can score: the candidate's score and ln(P_D ḡ_f / λ_fa).
     fast = candidates.score + np.log(
         pd * (1.0 - slow_fraction) / (math.pi * reach * reach * clutter_density)
     )
-    need = np.flatnonzero(
-        np.asarray(fresh, dtype=bool) & (dt >= MIN_PAIR_INTERVAL) & (fast <= floor)
-    )
+    need = np.flatnonzero(fresh & (dt >= MIN_PAIR_INTERVAL) & (fast <= floor))
     if need.size == 0:
         return out
     R = candidates.R.take(need, axis=0)
@@ -479,8 +487,8 @@ def next_hit_allowance(
     n = points.shape[0]
     if n < SPARSE_FRACTION * float(expected.min()):
         sparse = np.ones(need.size, dtype=bool)  # fewer in the whole scan
-    elif n > SPARSE_FRACTION * clutter_density * float(np.prod(np.ptp(points, axis=0))):
-        return out  # the scan is as dense as assumed over the area it spans
+    elif n > SPARSE_FRACTION * clutter_density * float(np.ptp(points, axis=0).max()) ** 2:
+        return out  # the scan is as dense as assumed over the square its detections span
     else:
         count = cKDTree(points).query_ball_point(
             candidates.z.take(need, axis=0), r, return_length=True

@@ -461,6 +461,10 @@ def test_a_fresh_candidate_in_sparse_surroundings_may_fall_short_by_a_third_hit(
     dense = np.random.default_rng(0).uniform(-2000.0, 2000.0, (60, 2))
     h = initiation.next_hit_allowance(cand, fresh, dense, np.ones(60, bool), 4.0, **ALLOWANCE)
     assert (h == 0.0).all()
+    # a line of aircraft on one airway, 1 km apart: few in reach although they span no area
+    line = np.column_stack([1000.0 * np.arange(10), np.zeros(10)])
+    h = initiation.next_hit_allowance(cand, fresh, line, np.ones(10, bool), 4.0, **ALLOWANCE)
+    np.testing.assert_allclose(h, [expected, 0.0, expected])
     # at a short revisit its fast pairs pass by themselves: no allowance needed
     h = initiation.next_hit_allowance(cand, fresh, z, np.ones(2, bool), 1.0, **ALLOWANCE)
     assert (h == 0.0).all()
