@@ -1,0 +1,227 @@
+"""The extended tracker's state as plain data (:mod:`trackers.state`), and back.
+
+Every track's random-matrix estimate (centroid ``x``, ``P``, extent ``X``, ``α``), its score,
+life-cycle counters and split and shed evidence, the clusters seen but not yet born
+(their centroid lines), the individual tracks being absorbed, the id counter and the time.
+Ids and detection ids are packed UTF-8 strings; an infinite cluster origin (a track started
+by hand) is kept as a flag beside a finite number, since saved arrays hold finite numbers.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from dataclasses import dataclass, replace
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from trackers.extended.random_matrix import ExtendedEstimate
+from trackers.state import SectionReader, StateError, StateSection, pack_strings
+
+if TYPE_CHECKING:
+    from trackers.extended.tracker import _State
+
+__all__ = ["ExtendedCheckpoint", "read_state"]
+
+_NUMBERED_ID = re.compile(r"^E[0-9]{1,18}$")
+
+
+def _put_strings(arrays: dict[str, np.ndarray], name: str, items: list[str]) -> None:
+    arrays[f"{name}.utf8"], arrays[f"{name}.len"] = pack_strings(items)
+
+
+def _put_groups(arrays: dict[str, np.ndarray], name: str, groups: list[tuple[str, ...]]) -> None:
+    _put_strings(arrays, name, [s for g in groups for s in g])
+    arrays[f"{name}.count"] = np.array([len(g) for g in groups], dtype=np.int64)
+
+
+@dataclass(frozen=True, eq=False)
+class ExtendedCheckpoint:
+    """An :class:`~trackers.extended.tracker.ExtendedTracker`'s state at one moment."""
+
+    state: _State
+
+    def export(self) -> StateSection:
+        """Plain data: the time, the id counter, and every field of the tracks, the clusters
+        not yet born and the tracks being absorbed, as arrays."""
+        st = self.state
+        tracks, cands = st.tracks, st.candidates
+        n = len(tracks)
+        arrays: dict[str, np.ndarray] = {}
+        _put_strings(arrays, "tracks.ids", [t.id for t in tracks])
+        _put_groups(arrays, "tracks.detection_ids", [t.detection_ids for t in tracks])
+        _put_groups(arrays, "tracks.visitors", [tuple(sorted(t.visitors)) for t in tracks])
+        arrays["tracks.x"] = np.array([t.estimate.x for t in tracks]).reshape(n, 4)
+        arrays["tracks.P"] = np.array([t.estimate.P for t in tracks]).reshape(n, 4, 4)
+        arrays["tracks.X"] = np.array([t.estimate.X for t in tracks]).reshape(n, 2, 2)
+        for name in _TRACK_FLOATS:
+            arrays[f"tracks.{name}"] = np.array([getattr(t, name) for t in tracks], dtype=float)
+        for name in _TRACK_INTS:
+            arrays[f"tracks.{name}"] = np.array([getattr(t, name) for t in tracks], dtype=np.int64)
+        arrays["tracks.alpha"] = np.array([t.estimate.alpha for t in tracks], dtype=float)
+        arrays["tracks.confirmed"] = np.array([t.confirmed for t in tracks], dtype=bool)
+        for name in ("split_centroid", "shed_centroid"):
+            arrays[f"tracks.{name}"] = np.array(
+                [getattr(t, name) for t in tracks], dtype=float
+            ).reshape(n, 2)
+        origin = np.array([t.origin for t in tracks], dtype=float)
+        arrays["tracks.has_origin"] = np.isfinite(origin)
+        arrays["tracks.origin"] = np.where(np.isfinite(origin), origin, 0.0)
+        k = len(cands)
+        arrays["candidates.centroid"] = np.array([c.centroid for c in cands], float).reshape(k, 2)
+        arrays["candidates.first_time"] = np.array([c.first_time for c in cands], dtype=float)
+        arrays["candidates.time"] = np.array([c.time for c in cands], dtype=float)
+        arrays["candidates.seen"] = np.array([c.seen for c in cands], dtype=np.int64)
+        arrays["candidates.sums"] = np.array([c.sums for c in cands], dtype=float).reshape(k, 7)
+        _put_strings(arrays, "absorbing.ids", [tid for tid, _ in st.absorbing])
+        arrays["absorbing.scans"] = np.array([s for _, s in st.absorbing], dtype=np.int64)
+        values = {
+            "time": st.time,
+            "next_id": st.next_id,
+            "n_tracks": n,
+            "n_candidates": k,
+            "n_absorbing": len(st.absorbing),
+        }
+        return StateSection(values, arrays)
+
+
+#: Float fields of a track, one number each.
+_TRACK_FLOATS = (
+    "time",
+    "score",
+    "peak",
+    "created",
+    "updated",
+    "gamma",
+    "split_gap",
+    "split_time",
+    "shed_gap",
+    "shed_time",
+)
+#: Integer fields of a track.
+_TRACK_INTS = ("hits", "split_evidence", "shed_evidence")
+
+
+def _spd(M: np.ndarray) -> bool:
+    """Every matrix of ``M (n, d, d)`` symmetric (to 1e-6 of its largest entry) with a
+    positive Cholesky factor."""
+    if M.size == 0:
+        return True
+    scale = np.abs(M).max(axis=(-2, -1), keepdims=True)
+    if (np.abs(M - np.swapaxes(M, -1, -2)) > 1e-6 * scale).any():
+        return False
+    try:
+        np.linalg.cholesky(0.5 * (M + np.swapaxes(M, -1, -2)))
+    except np.linalg.LinAlgError:
+        return False
+    return True
+
+
+def read_state(section: StateSection, base: _State, id_prefix: str = "") -> _State:
+    """The state a section of :meth:`ExtendedCheckpoint.export` holds, checked, under the
+    configuration of ``base`` (kept as it is); :class:`StateError` naming the field."""
+    from trackers.extended.tracker import ExtendedTrack, _Candidate
+
+    r = SectionReader(section, "peer/extended")
+    t = r.time("time")
+    next_id = r.integer("next_id", ge=1)
+    n = r.integer("n_tracks", ge=0)
+    k = r.integer("n_candidates", ge=0)
+    a = r.integer("n_absorbing", ge=0)
+    ids = [s or "" for s in r.strings("tracks.ids", n)]
+    det_ids = r.string_groups("tracks.detection_ids", n)
+    visitors = r.string_groups("tracks.visitors", n)
+    x = r.floats("tracks.x", (n, 4))
+    P = r.floats("tracks.P", (n, 4, 4))
+    X = r.floats("tracks.X", (n, 2, 2))
+    alpha = r.floats("tracks.alpha", (n,))
+    floats = {name: r.floats(f"tracks.{name}", (n,)) for name in _TRACK_FLOATS}
+    ints = {name: r.integers(f"tracks.{name}", (n,), ge=0) for name in _TRACK_INTS}
+    confirmed = r.booleans("tracks.confirmed", (n,))
+    split_c = r.floats("tracks.split_centroid", (n, 2))
+    shed_c = r.floats("tracks.shed_centroid", (n, 2))
+    has_origin = r.booleans("tracks.has_origin", (n,))
+    origin = r.floats("tracks.origin", (n,))
+    c_centroid = r.floats("candidates.centroid", (k, 2))
+    c_first = r.floats("candidates.first_time", (k,))
+    c_time = r.floats("candidates.time", (k,))
+    c_seen = r.integers("candidates.seen", (k,), ge=1)
+    c_sums = r.floats("candidates.sums", (k, 7))
+    absorbing_ids = [s or "" for s in r.strings("absorbing.ids", a)]
+    absorbing_scans = r.integers("absorbing.scans", (a,), ge=0)
+    r.finish()
+
+    def bad(detail: str) -> StateError:
+        return StateError(f"peer/extended: {detail}")
+
+    if len(set(ids)) != n or not all(ids):
+        raise bad("track ids must be unique and not empty")
+    own = [s.removeprefix(id_prefix) for s in ids if s.startswith(id_prefix)]
+    numbered = [int(s[1:]) for s in own if _NUMBERED_ID.match(s)]
+    if numbered and max(numbered) >= next_id:
+        raise bad(f"next_id {next_id} would give again the id {id_prefix}E{max(numbered)}")
+    if k and t is None:
+        raise bad("clusters without the time of the last scan")
+    if n:
+        # a track started by hand before the first scan has no scan time to stay within
+        last = math.inf if t is None else t
+        if (floats["created"] > floats["updated"]).any() or (floats["updated"] > last).any():
+            raise bad("track times must satisfy created <= updated <= time")
+        if (floats["time"] > last).any():
+            raise bad("a track is later than the last scan")
+        if (floats["peak"] < floats["score"]).any():
+            raise bad("a track's peak score is below its score")
+        if (alpha <= 0).any() or (floats["gamma"] <= 0).any():
+            raise bad("extent degrees of freedom and expected counts must be positive")
+        if not (_spd(P) and _spd(X)):
+            raise bad("a covariance or extent is not symmetric positive definite")
+    if k:
+        assert t is not None
+        if (c_first > c_time).any() or (c_time > t).any():
+            raise bad("cluster times must satisfy first <= latest <= time")
+    tracks = tuple(
+        ExtendedTrack(
+            id=ids[i],
+            estimate=ExtendedEstimate(x=x[i], P=P[i], X=X[i], alpha=float(alpha[i])),
+            time=float(floats["time"][i]),
+            score=float(floats["score"][i]),
+            peak=float(floats["peak"][i]),
+            hits=int(ints["hits"][i]),
+            confirmed=bool(confirmed[i]),
+            created=float(floats["created"][i]),
+            updated=float(floats["updated"][i]),
+            gamma=float(floats["gamma"][i]),
+            detection_ids=det_ids[i],
+            split_evidence=int(ints["split_evidence"][i]),
+            split_centroid=(float(split_c[i, 0]), float(split_c[i, 1])),
+            split_gap=float(floats["split_gap"][i]),
+            split_time=float(floats["split_time"][i]),
+            shed_evidence=int(ints["shed_evidence"][i]),
+            shed_centroid=(float(shed_c[i, 0]), float(shed_c[i, 1])),
+            shed_gap=float(floats["shed_gap"][i]),
+            shed_time=float(floats["shed_time"][i]),
+            origin=float(origin[i]) if has_origin[i] else math.inf,
+            visitors=frozenset(visitors[i]),
+        )
+        for i in range(n)
+    )
+    candidates = tuple(
+        _Candidate(
+            (float(c_centroid[j, 0]), float(c_centroid[j, 1])),
+            float(c_first[j]),
+            float(c_time[j]),
+            int(c_seen[j]),
+            tuple(float(v) for v in c_sums[j]),  # type: ignore[arg-type]
+        )
+        for j in range(k)
+    )
+    absorbing = tuple(zip(absorbing_ids, absorbing_scans.tolist(), strict=True))
+    return replace(
+        base,
+        tracks=tracks,
+        candidates=candidates,
+        next_id=next_id,
+        time=t,
+        absorbing=absorbing,
+    )
