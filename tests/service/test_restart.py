@@ -128,3 +128,34 @@ def test_kill_9_then_restart_restores_the_periodic_save(
     assert _post_all(again, payloads[30:32]) == [31, 32]
     code, _, _, err = again.terminate()
     assert code == 0, err
+
+
+def test_an_extended_track_survives_a_restart(
+    processes: list[ServiceProcess], tmp_path: Path, payloads: list[bytes]
+) -> None:
+    """An extended track started by hand, tracked through a few batches, comes back after
+    SIGTERM under its id with its extent, and the next one started takes the next id."""
+    files = ("--api-token", "t", "--state-file", str(tmp_path / "state.npz"))
+    auth = {"Authorization": "Bearer t"}
+    svc = _start(processes, *files)
+    _post_all(svc, payloads[:5])
+    body = {
+        "position": [5000.0, 5000.0],
+        "extent": {"semi_axes": [200.0, 50.0], "orientation": 0.3},
+    }
+    with httpx.Client(base_url=svc.url, timeout=10) as http:
+        r = http.post("/api/v1/tracks/extended", json=body, headers=auth)
+        assert r.status_code == 201, r.text
+        started = r.json()
+    _post_all(svc, payloads[5:8])
+    params = {"kind": "extended", "status": "all"}
+    before = httpx.get(svc.url + "/api/v1/tracks", params=params, timeout=5).json()["tracks"]
+    assert [t["id"] for t in before] == [started["id"]]
+    assert svc.terminate()[0] == 0
+    again = _start(processes, *files)
+    after = httpx.get(again.url + "/api/v1/tracks", params=params, timeout=5).json()["tracks"]
+    assert after == before
+    with httpx.Client(base_url=again.url, timeout=10) as http:
+        r = http.post("/api/v1/tracks/extended", json=body, headers=auth)
+        assert r.status_code == 201 and r.json()["id"] != started["id"]
+    assert again.terminate()[0] == 0
