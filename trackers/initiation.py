@@ -460,17 +460,18 @@ def next_hit_allowance(
     if not fresh.any():
         return out
     # The fresh candidates opened at one scan: when the lowest-scored of them passes, all do.
+    # ln(P_D (1 − w) / (π λ_fa)): what a fast pair adds, less 2 ln(v_max Δt) (logs: the
+    # quotient itself under- or overflows at extreme settings).
+    log_fast = math.log(pd * (1.0 - slow_fraction)) - math.log(math.pi) - math.log(clutter_density)
     dt0 = t - float(candidates.time[fresh].max())
     if dt0 >= MIN_PAIR_INTERVAL:
-        g0 = pd * (1.0 - slow_fraction) / (math.pi * (max_speed * dt0) ** 2 * clutter_density)
-        if float(candidates.score[fresh].min()) + math.log(g0) > floor:
+        best = float(candidates.score[fresh].min()) + log_fast - 2.0 * math.log(max_speed * dt0)
+        if best > floor:
             return out
     dt = t - candidates.time
     reach = max_speed * np.maximum(dt, MIN_PAIR_INTERVAL)
     # The best a fast pair can score: the candidate's score and ln(P_D ḡ_f / λ_fa).
-    fast = candidates.score + np.log(
-        pd * (1.0 - slow_fraction) / (math.pi * reach * reach * clutter_density)
-    )
+    fast = candidates.score + log_fast - 2.0 * np.log(reach)
     need = np.flatnonzero(fresh & (dt >= MIN_PAIR_INTERVAL) & (fast <= floor))
     if need.size == 0:
         return out
