@@ -196,6 +196,18 @@ class ServiceRuntime:
                 detection_keys=s.detection_keys or None,
                 scale_out=self.scale_out,
             )
+            where = (
+                f"mode {s.zenoh_mode}, listen {','.join(s.zenoh_listen) or 'none'}, connect "
+                f"{','.join(s.zenoh_connect) or 'none'}"
+            )
+            try:
+                zio.build_config()
+            except zenoh.ZError as exc:  # a bad configuration: waiting would not mend it
+                raise ZenohStartError(
+                    f"cannot configure the Zenoh session ({where}): {exc}"
+                ) from None
+            self._stopping.clear()
+            self.connecting = None
             self.engine.start()
             try:
                 zio.open()
@@ -203,9 +215,7 @@ class ServiceRuntime:
                 if s.zenoh_mode != "client":
                     self.engine.stop()
                     raise ZenohStartError(
-                        f"cannot open the Zenoh session (mode {s.zenoh_mode}, listen "
-                        f"{','.join(s.zenoh_listen) or 'none'}, connect "
-                        f"{','.join(s.zenoh_connect) or 'none'}): {exc}"
+                        f"cannot open the Zenoh session ({where}): {exc}"
                     ) from None
                 self._started = True
                 self.connecting = f"attempt 1: {_reason(exc)}"
@@ -276,6 +286,8 @@ class ServiceRuntime:
         if connector is not None and connector is not threading.current_thread():
             connector.join(CONNECT_RETRY_MAX + 5.0)
         with self._lock:
+            self._connector = None
+            self.connecting = None
             if not self._started:
                 return
             self._started = False

@@ -126,10 +126,10 @@ class ZenohIO:
 
     # -- lifecycle --------------------------------------------------------------------------
 
-    def open(self) -> None:
-        """Open the session and declare everything; raises ``zenoh.ZError`` on failure (for
-        example when a listen port is taken), leaving nothing open."""
-        conf = make_config(
+    def build_config(self) -> zenoh.Config:
+        """The session's Zenoh configuration; raises ``zenoh.ZError`` when it cannot be made
+        (a ``zenoh_config_file`` missing or not JSON5, a value Zenoh refuses)."""
+        return make_config(
             self.mode,
             self.listen,
             self.connect,
@@ -137,7 +137,11 @@ class ZenohIO:
             shared_memory=self._shared_memory,
             max_message_size=self._max_message_bytes,
         )
-        session = zenoh.open(conf)
+
+    def open(self) -> None:
+        """Open the session and declare everything; raises ``zenoh.ZError`` on failure (for
+        example when a listen port is taken), leaving nothing open."""
+        session = zenoh.open(self.build_config())
         try:
             self._tracks_pub = session.declare_publisher(
                 self.tracks_key,

@@ -490,3 +490,30 @@ def test_max_rate_publishing_loses_nothing_and_rest_keeps_answering(
         if pub.poll() is None:
             pub.kill()
         pub.wait(5)
+
+
+def test_a_client_with_a_missing_zenoh_config_file_exits_at_once(tmp_path: Path) -> None:
+    """Waiting for a router would not mend a configuration file that is not there."""
+    proc = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "service",
+            "--zenoh-mode",
+            "client",
+            "--zenoh-connect",
+            f"tcp/127.0.0.1:{free_port()}",
+            "--zenoh-config-file",
+            str(tmp_path / "missing.json5"),
+            "--http-port",
+            str(free_port()),
+            "--api-token",
+            "x",
+        ],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=30,
+    )
+    assert proc.returncode != 0
+    assert "cannot configure the Zenoh session" in proc.stderr
