@@ -509,6 +509,7 @@ class IndividualTracker:
             min_score=np.maximum(claims, tm.delete_threshold),
             group_fraction=init.group_fraction,
             group_velocity_std=init.group_velocity_std,
+            rivals=claims,
             allowance=next_hit_allowance(
                 cand,
                 cand.time == self._state.time,

@@ -435,11 +435,12 @@ def next_hit_allowance(
     and still start a track (0 for most): the score a third detection at the next revisit is
     expected to add,
 
-        h = max(0, ln(P_D / (2π √|S| λ_fa)) − 1),   S ≈ 4 R_c,
+        h = max(0, ln(P_D / (2π √|S| λ_fa)) − 1),   S ≈ 6 R_c,
 
-    ``S`` the innovation covariance of a two-point track one revisit on (its position, a
-    velocity from two points as uncertain as both, and the third detection's noise, each
-    about the candidate's ``R_c``) and ``−1`` the mean of ``−χ²₂/2``.
+    ``S`` the innovation covariance of a two-point track one revisit ``Δt`` on, with
+    detections about as noisy as the candidate's ``R_c``: its prediction ``z₂ + v Δt`` with
+    ``v = (z₂ − z₁)/Δt`` has covariance ``R + 2R + 2R = 5R`` (position, velocity and their
+    cross term ``R/Δt``), the third detection adds ``R``; ``−1`` is the mean of ``−χ²₂/2``.
 
     A pair's own score says whether two detections this far apart are likelier a target
     than clutter. At a long revisit the fast prior is spread over ``π (v_max Δt)²`` and the
@@ -477,7 +478,7 @@ def next_hit_allowance(
         return out
     R = candidates.R.take(need, axis=0)
     det = np.maximum(R[:, 0, 0] * R[:, 1, 1] - R[:, 0, 1] * R[:, 1, 0], 1e-300)
-    h = math.log(pd / (8.0 * math.pi * clutter_density)) - 0.5 * np.log(det) - 1.0
+    h = math.log(pd / (12.0 * math.pi * clutter_density)) - 0.5 * np.log(det) - 1.0
     keep = h > 0.0
     need, h = need[keep], h[keep]
     if need.size == 0:
@@ -558,13 +559,17 @@ def pair_candidates(
     group_fraction: float = 0.0,
     group_velocity_std: float = 1.0,
     allowance: np.ndarray | None = None,
+    rivals: np.ndarray | None = None,
 ) -> TwoPointTracks:
     """Every (candidate, free detection) pair a target no faster than ``max_speed`` could
     make, at most ``max_pairs`` per candidate (the highest scores), with the two-point state
     and the score ``L = L_c + ln(P_D g₂ / λ_fa)``; pairs with ``L ≤ min_score`` (a number,
     such as the deletion threshold of the sequential test, or one per detection of ``z``)
     are left out; a candidate's pairs may score ``allowance`` below it (one number per
-    candidate, 0 by default; :func:`next_hit_allowance`). Detections are indexed into ``z``.
+    candidate, 0 by default; :func:`next_hit_allowance`), but never below ``rivals``, the
+    score a pair on each detection must beat whatever the allowance (one per detection of
+    ``z``, ``−inf`` for none: a tentative track that took the detection). Detections are
+    indexed into ``z``.
 
     The velocity gate of the module docstring is ``ρ² dᵀ (R_c + R_j)⁻¹ d ≤ γ`` with
     ``ρ = max(0, 1 − v_max Δt / |d|)``: the part of ``d`` beyond the reach of ``v_max``.
@@ -583,6 +588,7 @@ def pair_candidates(
         return _no_pairs()
     zf, Rf = z.take(free_idx, axis=0), R.take(free_idx, axis=0)
     floor = min_score if np.ndim(min_score) == 0 else np.asarray(min_score).take(free_idx)
+    rival = None if rivals is None else np.asarray(rivals, dtype=float).take(free_idx)
     kw = dict(
         max_speed=max_speed,
         velocity_std=velocity_std,
@@ -622,8 +628,11 @@ def pair_candidates(
         # than the best of them.
         best_c = np.maximum.reduce(score, axis=1, keepdims=True)
         best_d = np.maximum.reduce(score, axis=0)
+        passes = score + allow[:, None] > floor
+        if rival is not None:
+            passes &= score > rival
         good = (
-            (score + allow[:, None] > floor)
+            passes
             & (score >= best_c - PAIR_PRUNE_LOG_RATIO)
             & (score >= best_d - PAIR_PRUNE_LOG_RATIO)
         )
@@ -633,7 +642,7 @@ def pair_candidates(
         T, cols = T.reshape(_ROWS, -1), ci * n_f + fj
     else:
         ci, fj, T, cols = _searched_pairs(
-            cz, cR, dt_c, base, zf, Rf, floor, vg if grouped else None, group, allow, **kw
+            cz, cR, dt_c, base, zf, Rf, floor, vg if grouped else None, group, allow, rival, **kw
         )
         if ci.size == 0:
             return _no_pairs()
@@ -665,11 +674,13 @@ def _searched_pairs(
     vg: np.ndarray | None,
     group: dict[str, float],
     allow: np.ndarray,
+    rival: np.ndarray | None,
     **kw: float,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """The pairs of :func:`pair_candidates` in a large problem: each candidate ``i`` (``cz``,
     ``cR``, ``dt``, ``base`` its rows) searches the free detections ``j`` (``zf``, ``Rf``,
-    ``floor`` a number or theirs, less the candidate's ``allow``) within
+    ``floor`` a number or theirs, less the candidate's ``allow``, above ``rival`` when
+    given) within
     :func:`search_radius`, or within the whole velocity
     gate for a candidate with a group velocity (``vg``, NaN: none; ``group`` the weight and
     spread of the group component, empty without one). Returns ``i`` and ``j`` (by
@@ -709,8 +720,11 @@ def _searched_pairs(
     best_d = np.full(zf.shape[0], -np.inf)
     np.maximum.at(best_d, fj, score)
     f = floor if np.ndim(floor) == 0 else floor.take(fj)
+    passes = score + allow.take(ci) > f
+    if rival is not None:
+        passes &= score > rival.take(fj)
     good = (
-        (score + allow.take(ci) > f)
+        passes
         & (score >= best_c - PAIR_PRUNE_LOG_RATIO)
         & (score >= best_d[fj] - PAIR_PRUNE_LOG_RATIO)
     ).nonzero()[0]

@@ -447,7 +447,7 @@ ALLOWANCE = dict(pd=0.9, clutter_density=1e-6, max_speed=700.0, slow_fraction=0.
 
 
 def test_a_fresh_candidate_in_sparse_surroundings_may_fall_short_by_a_third_hit():
-    """h = ln(P_D / (2π √|4 R_c| λ)) − 1 for a candidate at its first scan whose fast pairs
+    """h = ln(P_D / (2π √|6 R_c| λ)) − 1 for a candidate at its first scan whose fast pairs
     cannot pass the floor (Δt = 4 s: ln(P_D ḡ_f / λ) = −4.9) and around which fewer
     detections lie than half of what λ predicts within its reach (2.8 km: 24.6); else 0."""
     cand = candidates_at([[0.0, 0.0], [0.0, 0.0], [0.0, 0.0]], variance=900.0)
@@ -455,7 +455,7 @@ def test_a_fresh_candidate_in_sparse_surroundings_may_fall_short_by_a_third_hit(
     fresh = np.array([True, False, True])
     z = np.array([[1000.0, 0.0], [50_000.0, 0.0]])
     h = initiation.next_hit_allowance(cand, fresh, z, np.ones(2, bool), 4.0, **ALLOWANCE)
-    expected = math.log(0.9 / (2 * math.pi * 4 * 900.0 * 1e-6)) - 1.0
+    expected = math.log(0.9 / (2 * math.pi * 6 * 900.0 * 1e-6)) - 1.0
     np.testing.assert_allclose(h, [expected, 0.0, expected])
     # a detection-rich neighbourhood: as dense as assumed, no allowance
     dense = np.random.default_rng(0).uniform(-2000.0, 2000.0, (60, 2))
@@ -488,3 +488,17 @@ def test_fast_targets_at_a_long_revisit_start_without_a_stated_clutter_density(p
     assert len(conf) == 3
     for t in conf:
         assert np.hypot(*(truth - np.array(t.position)).T).min() < 100.0
+
+
+def test_the_allowance_never_lets_a_pair_below_the_tentative_track_it_must_beat():
+    """A pair on a detection a tentative track took must outscore that track, allowance or
+    not; the allowance lowers only the deletion threshold."""
+    cand = candidates_at([[0.0, 0.0]])
+    z = np.array([[100.0, 0.0]])
+    R = np.tile(100.0 * np.eye(2), (1, 1, 1))
+    kw = dict(PAIRING, clutter_density=1e-6, min_score=np.array([50.0]))
+    assert pair_candidates(cand, z, R, np.ones(1, bool), 1.0, **kw).size == 0
+    allowed = dict(kw, allowance=np.array([100.0]))
+    assert pair_candidates(cand, z, R, np.ones(1, bool), 1.0, **allowed).size == 1
+    rival = dict(allowed, rivals=np.array([50.0]))
+    assert pair_candidates(cand, z, R, np.ones(1, bool), 1.0, **rival).size == 0
