@@ -41,6 +41,7 @@ __all__ = [
     "decode_state",
     "encode_state",
     "pack_strings",
+    "positive_definite",
     "unpack_strings",
 ]
 
@@ -127,6 +128,22 @@ def unpack_strings(utf8: np.ndarray, lengths: np.ndarray, where: str) -> list[st
 
 
 # -- reading a section ----------------------------------------------------------------------
+
+
+def positive_definite(M: np.ndarray) -> bool:
+    """Whether every matrix of ``M (..., d, d)`` is symmetric (to 1e-6 of its largest entry)
+    and positive definite (it has a Cholesky factor)."""
+    M = np.asarray(M, dtype=float)
+    if M.size == 0:
+        return True
+    scale = np.abs(M).max(axis=(-2, -1), keepdims=True)
+    if (np.abs(M - np.swapaxes(M, -1, -2)) > 1e-6 * scale).any():
+        return False
+    try:
+        np.linalg.cholesky(0.5 * (M + np.swapaxes(M, -1, -2)))
+    except np.linalg.LinAlgError:
+        return False
+    return True
 
 
 class SectionReader:

@@ -17,7 +17,13 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from trackers.extended.random_matrix import ExtendedEstimate
-from trackers.state import SectionReader, StateError, StateSection, pack_strings
+from trackers.state import (
+    SectionReader,
+    StateError,
+    StateSection,
+    pack_strings,
+    positive_definite,
+)
 
 if TYPE_CHECKING:
     from trackers.extended.tracker import _State
@@ -103,21 +109,6 @@ _TRACK_FLOATS = (
 _TRACK_INTS = ("hits", "split_evidence", "shed_evidence")
 
 
-def _spd(M: np.ndarray) -> bool:
-    """Every matrix of ``M (n, d, d)`` symmetric (to 1e-6 of its largest entry) with a
-    positive Cholesky factor."""
-    if M.size == 0:
-        return True
-    scale = np.abs(M).max(axis=(-2, -1), keepdims=True)
-    if (np.abs(M - np.swapaxes(M, -1, -2)) > 1e-6 * scale).any():
-        return False
-    try:
-        np.linalg.cholesky(0.5 * (M + np.swapaxes(M, -1, -2)))
-    except np.linalg.LinAlgError:
-        return False
-    return True
-
-
 def read_state(section: StateSection, base: _State, id_prefix: str = "") -> _State:
     """The state a section of :meth:`ExtendedCheckpoint.export` holds, checked, under the
     configuration of ``base`` (kept as it is); :class:`StateError` naming the field."""
@@ -164,17 +155,16 @@ def read_state(section: StateSection, base: _State, id_prefix: str = "") -> _Sta
     if k and t is None:
         raise bad("clusters without the time of the last scan")
     if n:
-        # a track started by hand before the first scan has no scan time to stay within
-        last = math.inf if t is None else t
-        if (floats["created"] > floats["updated"]).any() or (floats["updated"] > last).any():
-            raise bad("track times must satisfy created <= updated <= time")
-        if (floats["time"] > last).any():
-            raise bad("a track is later than the last scan")
+        # each track's own time: one started by hand may be ahead of the last scan
+        if (floats["created"] > floats["updated"]).any() or (
+            floats["updated"] > floats["time"]
+        ).any():
+            raise bad("track times must satisfy created <= updated <= the track's time")
         if (floats["peak"] < floats["score"]).any():
             raise bad("a track's peak score is below its score")
         if (alpha <= 0).any() or (floats["gamma"] <= 0).any():
             raise bad("extent degrees of freedom and expected counts must be positive")
-        if not (_spd(P) and _spd(X)):
+        if not (positive_definite(P) and positive_definite(X)):
             raise bad("a covariance or extent is not symmetric positive definite")
     if k:
         assert t is not None

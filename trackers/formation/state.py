@@ -17,7 +17,13 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from trackers.models.motion import STATE_DIM
-from trackers.state import SectionReader, StateError, StateSection, pack_strings
+from trackers.state import (
+    SectionReader,
+    StateError,
+    StateSection,
+    pack_strings,
+    positive_definite,
+)
 
 if TYPE_CHECKING:
     from trackers.formation.tracker import _State
@@ -94,15 +100,6 @@ class FormationCheckpoint:
         return StateSection(values, arrays)
 
 
-def _covariances_ok(P: np.ndarray) -> bool:
-    """A positive diagonal and symmetry to within 1e-6 of the largest entry, every matrix."""
-    if P.size == 0:
-        return True
-    diag = np.diagonal(P, axis1=-2, axis2=-1)
-    scale = np.abs(P).max(axis=(-2, -1), keepdims=True)
-    return bool((diag > 0).all() and (np.abs(P - np.swapaxes(P, -1, -2)) <= 1e-6 * scale).all())
-
-
 def read_state(section: StateSection, base: _State, id_prefix: str = "") -> _State:
     """The state a section of :meth:`FormationCheckpoint.export` holds, checked, under the
     configuration of ``base`` (kept as it is); :class:`StateError` naming the field."""
@@ -156,6 +153,8 @@ def read_state(section: StateSection, base: _State, id_prefix: str = "") -> _Sta
     everyone = [m for ms in members for m in ms]
     if len(set(everyone)) != n or not all(everyone):
         raise bad("a member is in two formations, or twice in one")
+    if len(set(req_ids) | set(fids)) != nr + nf or any(len(m) < 2 for m in req_members):
+        raise bad("requests must have ids of their own and at least 2 members each")
     own = [s.removeprefix(id_prefix) for s in fids + req_ids if s.startswith(id_prefix)]
     numbered = [int(s[1:]) for s in own if _NUMBERED_ID.match(s)]
     if numbered and max(numbered) >= next_id:
@@ -168,8 +167,8 @@ def read_state(section: StateSection, base: _State, id_prefix: str = "") -> _Sta
             raise bad("member times must satisfy created <= updated <= time")
         if (mu < 0).any() or (mu > 1).any() or (np.abs(mu.sum(axis=1) - 1.0) > 1e-6).any():
             raise bad("mode probabilities must be in [0, 1] and sum to 1")
-        if not _covariances_ok(P):
-            raise bad("a member covariance is not symmetric with a positive diagonal")
+        if not positive_definite(P):
+            raise bad("a member covariance is not symmetric positive definite")
     config = base.config
     formations: list[Formation] = []
     start = 0

@@ -452,7 +452,7 @@ class FormationTracker:
             if scan.clutter_density is None
             else float(scan.clutter_density)
         )
-        formations, claimed = _update(formations, scan, config, pd, lam)
+        formations, claimed = _update(formations, scan, config, pd, lam, set(taken))
         # Members leaving, lost, and formations ending.
         kept: list[Formation] = []
         hand_back: list[PointTrackState] = []
@@ -573,10 +573,17 @@ def _match_one(
 
 
 def _update(
-    formations: list[Formation], scan: Scan, config: TrackerConfig, pd: float, lam: float
+    formations: list[Formation],
+    scan: Scan,
+    config: TrackerConfig,
+    pd: float,
+    lam: float,
+    taken: set[str] = frozenset(),  # type: ignore[assignment]
 ) -> tuple[list[Formation], np.ndarray]:
     """Pre-association, template matching and the members' updates for one scan; the
-    detections claimed."""
+    detections claimed. Members ``taken`` from the point tracker this scan are not looked
+    for as departing (one handed back at once would stay the point tracker's, and the
+    detection found for it would be lost)."""
     claimed = np.zeros(scan.size, dtype=bool)
     if not formations or scan.size == 0:
         return [_missed(f, pd) for f in formations], claimed
@@ -691,6 +698,8 @@ def _update(
     for i in range(len(formations)):
         sl = slice(int(starts[i]), int(starts[i + 1]))
         seen[sl] = hit[sl].any()
+    if taken:
+        seen &= np.array([m not in taken for f in formations for m in f.members], dtype=bool)
     found = _departures(
         np.flatnonzero(seen & ~hit),
         np.flatnonzero(~claimed),

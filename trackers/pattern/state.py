@@ -20,7 +20,13 @@ import numpy as np
 
 from trackers.pattern.bending import STATE_DIM
 from trackers.pattern.multiple_model import MMEstimate
-from trackers.state import SectionReader, StateError, StateSection, pack_strings
+from trackers.state import (
+    SectionReader,
+    StateError,
+    StateSection,
+    pack_strings,
+    positive_definite,
+)
 
 if TYPE_CHECKING:
     from trackers.pattern.tracker import _State
@@ -79,6 +85,12 @@ class PatternCheckpoint:
         arrays["tracks.filter_probabilities"] = _cat(
             [t.estimate.filter_probabilities for t in tracks], ()
         )
+        arrays["tracks.pattern_points"] = _cat(
+            [np.asarray(t.pattern_points, dtype=float).reshape(-1, 2) for t in tracks], (2,)
+        )
+        arrays["tracks.pattern_points.count"] = np.array(
+            [len(t.pattern_points) for t in tracks], dtype=np.int64
+        )
         k = len(sights)
         arrays["sightings.shape"] = np.array([s.shape for s in sights], dtype=np.int64)
         arrays["sightings.origin"] = np.array([s.origin for s in sights], float).reshape(k, 2)
@@ -102,19 +114,12 @@ class PatternCheckpoint:
             "n_tracks": n,
             "n_filters": int(arrays["tracks.filters"].sum()),
             "n_layer_probabilities": int(arrays["tracks.layer_sizes"].sum()),
+            "n_pattern_points": int(arrays["tracks.pattern_points"].shape[0]),
             "n_sightings": k,
             "n_sighting_rows": int(arrays["sightings.rows"].size),
             "n_sensors": len(st.sensor_times),
         }
         return StateSection(values, arrays)
-
-
-def _covariances_ok(P: np.ndarray) -> bool:
-    if P.size == 0:
-        return True
-    diag = np.diagonal(P, axis1=-2, axis2=-1)
-    scale = np.abs(P).max(axis=(-2, -1), keepdims=True)
-    return bool((diag > 0).all() and (np.abs(P - np.swapaxes(P, -1, -2)) <= 1e-6 * scale).all())
 
 
 def _probabilities_ok(p: np.ndarray) -> bool:
@@ -132,6 +137,7 @@ def read_state(section: StateSection, base: _State, id_prefix: str = "") -> _Sta
     n = r.integer("n_tracks", ge=0)
     nfil = r.integer("n_filters", ge=0)
     nlp = r.integer("n_layer_probabilities", ge=0)
+    npts = r.integer("n_pattern_points", ge=0)
     k = r.integer("n_sightings", ge=0)
     nrows = r.integer("n_sighting_rows", ge=0)
     ns = r.integer("n_sensors", ge=0)
@@ -154,6 +160,8 @@ def read_state(section: StateSection, base: _State, id_prefix: str = "") -> _Sta
     fx = r.floats("tracks.filter_x", (nfil, D))
     fP = r.floats("tracks.filter_P", (nfil, D, D))
     fp = r.floats("tracks.filter_probabilities", (nfil,))
+    points = r.floats("tracks.pattern_points", (npts, 2))
+    points_count = r.integers("tracks.pattern_points.count", (n,), ge=0)
     s_shape = r.integers("sightings.shape", (k,), ge=0)
     s_origin = r.floats("sightings.origin", (k, 2))
     s = {
@@ -179,26 +187,35 @@ def read_state(section: StateSection, base: _State, id_prefix: str = "") -> _Sta
     numbered = [int(i[1:]) for i in own if _NUMBERED_ID.match(i)]
     if numbered and max(numbered) >= next_id:
         raise bad(f"next_id {next_id} would give again the id {id_prefix}B{max(numbered)}")
-    if int(sizes.sum()) != nlp or int(filters.sum()) != nfil or int(s_rows_count.sum()) != nrows:
-        raise bad("the counts of layer probabilities, filters or sighted rows do not add up")
-    if (n or k) and t is None:
-        raise bad("tracks or sightings without the time of the last scan")
+    if (
+        int(sizes.sum()) != nlp
+        or int(filters.sum()) != nfil
+        or int(s_rows_count.sum()) != nrows
+        or int(points_count.sum()) != npts
+    ):
+        raise bad("the counts of layer probabilities, filters, points or rows do not add up")
+    if k and t is None:
+        raise bad("sightings without the time of the last scan")
+    if k and (s_shape >= len(saved_patterns)).any():
+        raise bad("a sighting's shape is not one of the saved patterns")
     if n:
-        assert t is not None
-        if (f["created"] > f["updated"]).any() or (f["updated"] > t).any():
-            raise bad("track times must satisfy created <= updated <= time")
+        # each track's own time: one started by hand may be before the first scan or ahead
+        if (f["created"] > f["updated"]).any() or (f["updated"] > f["time"]).any():
+            raise bad("track times must satisfy created <= updated <= the track's time")
         if (f["peak"] < f["score"]).any():
             raise bad("a track's peak score is below its score")
-        if not (_covariances_ok(P) and _covariances_ok(fP)):
-            raise bad("a covariance is not symmetric with a positive diagonal")
+        if not (positive_definite(P) and positive_definite(fP)):
+            raise bad("a covariance is not symmetric positive definite")
         if not (_probabilities_ok(layer_p) and _probabilities_ok(fp)):
             raise bad("mode probabilities must be in [0, 1]")
         if any(len(sh) != int(z[2]) for sh, z in zip(shapes, sizes, strict=True)):
             raise bad("a track's shape names do not match its shape layer")
     if k and (s["time"] > t).any():  # type: ignore[operator]
         raise bad("a sighting is later than the last scan")
+    if n and not (points_count >= 3).all():
+        raise bad("a track's pattern has fewer than 3 points")
     tracks = []
-    lp_at = fil_at = 0
+    lp_at = fil_at = pt_at = 0
     state = base
     for i in range(n):
         lp = []
@@ -207,6 +224,8 @@ def read_state(section: StateSection, base: _State, id_prefix: str = "") -> _Sta
             lp_at += size
         fil = slice(fil_at, fil_at + int(filters[i]))
         fil_at = fil.stop
+        pts = points[pt_at : pt_at + int(points_count[i])]
+        pt_at += int(points_count[i])
         try:
             est = MMEstimate(
                 x=x[i],
@@ -230,12 +249,12 @@ def read_state(section: StateSection, base: _State, id_prefix: str = "") -> _Sta
             hits=int(hits[i]),
             created=float(f["created"][i]),
             updated=float(f["updated"][i]),
-            pattern_points=np.zeros((0, 2)),
+            pattern_points=pts.copy(),
             detection_ids=det_ids[i],
         )
         modes, cfg = state.modes, state.config
-        if modes is None:
-            tracks.append(track)  # no pattern configured: kept as a configuration change does
+        if modes is None:  # no pattern configured: kept as a configuration change keeps it
+            tracks.append(track)
             continue
         same = (
             tuple(track.shapes) == tuple(modes.layers[2])

@@ -82,7 +82,7 @@ def _edited(section: StateSection, **arrays: np.ndarray) -> StateSection:
                 {**s.values, "time": 5.0},
                 {**s.arrays, "tracks.updated": s.arrays["tracks.updated"] + 1e3},
             ),
-            "created <= updated <= time",
+            "created <= updated <= the track's time",
         ),
         (lambda s: _edited(s, **{"tracks.alpha": s.arrays["tracks.alpha"][:0]}), "tracks.alpha"),
         (lambda s: StateSection({**s.values, "n_tracks": -1}, s.arrays), "n_tracks"),
@@ -114,3 +114,16 @@ def test_a_file_without_an_extended_section_leaves_the_tracker_empty(
     b.import_state(older)
     assert not [t for t in b.snapshot() if t.kind == "extended"]
     assert {t.id for t in b.snapshot()} == {t.id for t in a.snapshot() if t.kind != "extended"}
+
+
+def test_a_track_started_by_hand_ahead_of_the_last_scan_is_restored() -> None:
+    """The service lets a track be started a little after the last batch's time (within the
+    time-jump allowance): such a state is valid and comes back."""
+    p = TrackingPipeline.all_kinds(TrackerConfig())
+    p.process(Scan(sensor_id="s", time=1.0, z=np.zeros((0, 2)), R=np.zeros((0, 2, 2))))
+    ext = next(q for q in p.peers if q.kind == "extended")
+    assert isinstance(ext, ExtendedTracker)
+    ext.start(3.0, np.array([0.0, 0.0]), np.zeros(2), np.eye(2) * 100.0)
+    q = TrackingPipeline.all_kinds(TrackerConfig())
+    q.import_state(decode_state(encode_state(p.export_state()))[0])
+    assert [t.id for t in q.snapshot() if t.kind == "extended"] == ["E1"]

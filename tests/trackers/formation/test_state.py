@@ -82,7 +82,7 @@ def _edit(section: StateSection, values=None, **arrays: np.ndarray) -> StateSect
         ),
         (
             lambda s: _edit(s, **{"members.P": -s.arrays["members.P"]}),
-            "positive diagonal",
+            "symmetric positive definite",
         ),
         (lambda s: _edit(s, {"time": None}), "without the time"),
     ],

@@ -69,7 +69,7 @@ def test_a_track_saved_under_another_filter_is_adapted() -> None:
         (lambda v, a: ({**v, "next_id": 1}, a), "would give again the id B1"),
         (
             lambda v, a: (v, {**a, "tracks.P": -a["tracks.P"]}),
-            "positive diagonal",
+            "symmetric positive definite",
         ),
         (lambda v, a: ({**v, "n_filters": 6}, a), "tracks.filter_x: shape"),
         (lambda v, a: ({**v, "patterns": "first"}, a), "list of pattern names"),
@@ -84,3 +84,33 @@ def test_a_bad_section_is_refused_and_changes_nothing(edit, message: str) -> Non
         peer.import_state(StateSection(values, arrays))
     assert peer.tracks is before
     assert np.isfinite(section.arrays["tracks.x"]).all()
+
+
+def test_a_track_started_by_hand_before_any_scan_comes_back() -> None:
+    peer = PatternTracker(_config("lmm"))
+    track = peer.start(5.0, "first", [0.0, 0.0], [10.0, 0.0], 0.3)
+    other = PatternTracker(_config("lmm"))
+    other.import_state(peer.export_state())
+    assert [t.id for t in other.tracks] == [track.id]
+
+
+def test_tracks_restored_with_no_pattern_configured_keep_their_points() -> None:
+    """As a configuration change that removes every pattern keeps the tracks, so does a
+    restart under it; their snapshots still hold the pattern's extent."""
+    peer = PatternTracker(TrackerConfig())
+    peer.import_state(_saved())
+    (track,) = peer.tracks
+    assert track.pattern_points.shape == (5, 2)
+    (snap,) = peer.snapshot()
+    assert snap.extent is not None and snap.attitude is not None
+
+
+def test_a_sighting_of_a_pattern_not_saved_is_refused() -> None:
+    p = TrackingPipeline.all_kinds(_config("lmm"))
+    for i in range(2):
+        p.process(RUN.to_scan(i))
+    section = p.export_state().peers["point_patterns"]
+    assert section.values["n_sightings"] == 1
+    bad = StateSection({**section.values, "patterns": []}, section.arrays)
+    with pytest.raises(StateError, match="sighting's shape"):
+        PatternTracker(_config("lmm")).import_state(bad)
