@@ -52,7 +52,7 @@ from trackers.models.motion import STATE_DIM, build_models
 from trackers.peers import PointDirectives, PointProposal, PointTrackState, PointTrackView
 from trackers.rows import RowArrays, sort_within_groups
 from trackers.scoring import hit_increment, initial_score, miss_increment, sequential_test
-from trackers.state import SectionReader, StateError, StateSection, pack_strings
+from trackers.state import SectionReader, StateError, StateSection, put_strings
 from trackers.types import Scan, StepResult, TrackSnapshot
 
 __all__ = ["Checkpoint", "IndividualTracker", "TrackArrays"]
@@ -654,8 +654,8 @@ class Checkpoint:
         tr, cand = st.tracks, st.candidates
         groups = tr.detection_ids.tolist()
         arrays: dict[str, np.ndarray] = {}
-        _put_strings(arrays, "tracks.ids", tr.ids.tolist())
-        _put_strings(arrays, "tracks.detection_ids", [d for g in groups for d in g])
+        put_strings(arrays, "tracks.ids", tr.ids.tolist())
+        put_strings(arrays, "tracks.detection_ids", [d for g in groups for d in g])
         arrays["tracks.detection_ids.count"] = np.fromiter(
             map(len, groups), dtype=np.int64, count=len(groups)
         )
@@ -663,7 +663,7 @@ class Checkpoint:
             arrays[f"tracks.{name}"] = getattr(tr, name)
         for name in _CANDIDATE_NUMBERS:
             arrays[f"candidates.{name}"] = getattr(cand, name)
-        _put_strings(arrays, "candidates.detection_ids", cand.detection_ids.tolist())
+        put_strings(arrays, "candidates.detection_ids", cand.detection_ids.tolist())
         grouped = np.isfinite(cand.group_velocity).all(axis=1)
         arrays["candidates.grouped"] = grouped
         arrays["candidates.group_velocity"] = np.where(grouped[:, None], cand.group_velocity, 0.0)
@@ -704,10 +704,6 @@ def _read_group_velocities(r: SectionReader, k: int) -> np.ndarray:
         v = r.floats("candidates.group_velocity", (k, 2))
         out[grouped] = v[grouped]
     return out
-
-
-def _put_strings(arrays: dict[str, np.ndarray], name: str, items: list[str | None]) -> None:
-    arrays[f"{name}.utf8"], arrays[f"{name}.len"] = pack_strings(items)
 
 
 def _covariances_ok(P: np.ndarray) -> bool:

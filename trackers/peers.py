@@ -42,7 +42,7 @@ it predicts its tracks for the peers, then proposes its step under the peers'
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, Protocol, runtime_checkable
 
@@ -65,6 +65,7 @@ __all__ = [
     "PointTrackView",
     "PointTracker",
     "ResolutionCell",
+    "SavesImmutableState",
     "StateCheckpoint",
     "check_proposal",
     "combine_directives",
@@ -237,6 +238,40 @@ class PersistentTracker(Protocol):
     def check_state(self, section: StateSection) -> Any: ...
 
     def restore_state(self, checked: Any) -> None: ...
+
+
+class SavesImmutableState:
+    """The :class:`PersistentTracker` methods of a tracker whose whole state is one immutable
+    object, ``self._state`` (so a checkpoint just holds it): the class names its checkpoint
+    type, ``_checkpoint_type(state)`` with an ``export()``, and ``_read_state(section, state,
+    id_prefix)``, which reads an exported section back under the configuration of ``state``
+    (the one in force) and raises :class:`~trackers.state.StateError` saying why it cannot."""
+
+    _state: Any
+    id_prefix: str
+    _checkpoint_type: Callable[[Any], StateCheckpoint]
+    _read_state: Callable[[StateSection, Any, str], Any]
+
+    def checkpoint(self) -> StateCheckpoint:
+        """The committed state, to export later on any thread (free: it is immutable)."""
+        return self._checkpoint_type(self._state)
+
+    def export_state(self) -> StateSection:
+        return self.checkpoint().export()
+
+    def check_state(self, section: StateSection) -> Any:
+        """A section that :meth:`export_state` wrote, read and checked under the
+        configuration in force; :class:`~trackers.state.StateError` when it cannot be used."""
+        return self._read_state(section, self._state, self.id_prefix)
+
+    def restore_state(self, checked: Any) -> None:
+        """Put a state that :meth:`check_state` returned in place of the current one."""
+        if type(checked) is not type(self._state):
+            raise TypeError("restore_state takes what check_state returned")
+        self._state = checked
+
+    def import_state(self, section: StateSection) -> None:
+        self.restore_state(self.check_state(section))
 
 
 @dataclass(frozen=True)

@@ -38,10 +38,13 @@ __all__ = [
     "SectionReader",
     "StateError",
     "StateSection",
+    "check_id_counter",
     "decode_state",
     "encode_state",
     "pack_strings",
     "positive_definite",
+    "put_string_groups",
+    "put_strings",
     "unpack_strings",
 ]
 
@@ -125,6 +128,35 @@ def unpack_strings(utf8: np.ndarray, lengths: np.ndarray, where: str) -> list[st
         ]
     except UnicodeDecodeError as exc:
         raise StateError(f"{where}: a string is not UTF-8 ({exc.reason})") from None
+
+
+def put_strings(arrays: dict[str, np.ndarray], name: str, items: Sequence[str | None]) -> None:
+    """``items`` into ``arrays`` as ``name.utf8`` and ``name.len`` (:func:`pack_strings`), as
+    :meth:`SectionReader.strings` reads them."""
+    arrays[f"{name}.utf8"], arrays[f"{name}.len"] = pack_strings(items)
+
+
+def put_string_groups(
+    arrays: dict[str, np.ndarray], name: str, groups: Sequence[Sequence[str]]
+) -> None:
+    """Tuples of strings into ``arrays``: their strings end to end and each tuple's count
+    (``name.count``), as :meth:`SectionReader.string_groups` reads them."""
+    put_strings(arrays, name, [s for g in groups for s in g])
+    arrays[f"{name}.count"] = np.array([len(g) for g in groups], dtype=np.int64)
+
+
+def check_id_counter(
+    ids: Sequence[str], next_id: int, prefix: str, letter: str, where: str
+) -> None:
+    """Raise :class:`StateError` (naming ``where``) when the id counter ``next_id`` would give
+    again one of ``ids`` of the form ``{prefix}{letter}{n}``."""
+    numbered = re.compile(rf"^{re.escape(letter)}[0-9]{{1,18}}$")
+    own = [s.removeprefix(prefix) for s in ids if s.startswith(prefix)]
+    top = max((int(s[len(letter) :]) for s in own if numbered.match(s)), default=0)
+    if top >= next_id:
+        raise StateError(
+            f"{where}: next_id {next_id} would give again the id {prefix}{letter}{top}"
+        )
 
 
 # -- reading a section ----------------------------------------------------------------------

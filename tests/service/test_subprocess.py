@@ -302,15 +302,15 @@ def test_settings_file_and_precedence(processes: list[ServiceProcess], tmp_path:
     assert svc.terminate()[0] == 0
 
 
-def test_zenoh_port_in_use_fails_clearly(processes: list[ServiceProcess]) -> None:
-    first = _start(processes, "--api-token", "x")
-    proc = subprocess.run(
+def _run_to_exit(*args: str) -> subprocess.CompletedProcess[str]:
+    """``python -m service`` with ``args`` (a free HTTP port and a token added), run until it
+    exits (within 30 s)."""
+    return subprocess.run(
         [
             sys.executable,
             "-m",
             "service",
-            "--zenoh-listen",
-            first.endpoint,
+            *args,
             "--http-port",
             str(free_port()),
             "--api-token",
@@ -321,6 +321,11 @@ def test_zenoh_port_in_use_fails_clearly(processes: list[ServiceProcess]) -> Non
         text=True,
         timeout=30,
     )
+
+
+def test_zenoh_port_in_use_fails_clearly(processes: list[ServiceProcess]) -> None:
+    first = _start(processes, "--api-token", "x")
+    proc = _run_to_exit("--zenoh-listen", first.endpoint)
     assert proc.returncode != 0
     assert "cannot open the Zenoh session" in proc.stderr
     assert first.terminate()[0] == 0
@@ -494,26 +499,13 @@ def test_max_rate_publishing_loses_nothing_and_rest_keeps_answering(
 
 def test_a_client_with_a_missing_zenoh_config_file_exits_at_once(tmp_path: Path) -> None:
     """Waiting for a router would not mend a configuration file that is not there."""
-    proc = subprocess.run(
-        [
-            sys.executable,
-            "-m",
-            "service",
-            "--zenoh-mode",
-            "client",
-            "--zenoh-connect",
-            f"tcp/127.0.0.1:{free_port()}",
-            "--zenoh-config-file",
-            str(tmp_path / "missing.json5"),
-            "--http-port",
-            str(free_port()),
-            "--api-token",
-            "x",
-        ],
-        cwd=ROOT,
-        capture_output=True,
-        text=True,
-        timeout=30,
+    proc = _run_to_exit(
+        "--zenoh-mode",
+        "client",
+        "--zenoh-connect",
+        f"tcp/127.0.0.1:{free_port()}",
+        "--zenoh-config-file",
+        str(tmp_path / "missing.json5"),
     )
     assert proc.returncode != 0
     assert "cannot configure the Zenoh session" in proc.stderr

@@ -10,7 +10,6 @@ by hand) is kept as a flag beside a finite number, since saved arrays hold finit
 from __future__ import annotations
 
 import math
-import re
 from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING
 
@@ -21,25 +20,16 @@ from trackers.state import (
     SectionReader,
     StateError,
     StateSection,
-    pack_strings,
+    check_id_counter,
     positive_definite,
+    put_string_groups,
+    put_strings,
 )
 
 if TYPE_CHECKING:
     from trackers.extended.tracker import _State
 
 __all__ = ["ExtendedCheckpoint", "read_state"]
-
-_NUMBERED_ID = re.compile(r"^E[0-9]{1,18}$")
-
-
-def _put_strings(arrays: dict[str, np.ndarray], name: str, items: list[str]) -> None:
-    arrays[f"{name}.utf8"], arrays[f"{name}.len"] = pack_strings(items)
-
-
-def _put_groups(arrays: dict[str, np.ndarray], name: str, groups: list[tuple[str, ...]]) -> None:
-    _put_strings(arrays, name, [s for g in groups for s in g])
-    arrays[f"{name}.count"] = np.array([len(g) for g in groups], dtype=np.int64)
 
 
 @dataclass(frozen=True, eq=False)
@@ -55,9 +45,9 @@ class ExtendedCheckpoint:
         tracks, cands = st.tracks, st.candidates
         n = len(tracks)
         arrays: dict[str, np.ndarray] = {}
-        _put_strings(arrays, "tracks.ids", [t.id for t in tracks])
-        _put_groups(arrays, "tracks.detection_ids", [t.detection_ids for t in tracks])
-        _put_groups(arrays, "tracks.visitors", [tuple(sorted(t.visitors)) for t in tracks])
+        put_strings(arrays, "tracks.ids", [t.id for t in tracks])
+        put_string_groups(arrays, "tracks.detection_ids", [t.detection_ids for t in tracks])
+        put_string_groups(arrays, "tracks.visitors", [tuple(sorted(t.visitors)) for t in tracks])
         arrays["tracks.x"] = np.array([t.estimate.x for t in tracks]).reshape(n, 4)
         arrays["tracks.P"] = np.array([t.estimate.P for t in tracks]).reshape(n, 4, 4)
         arrays["tracks.X"] = np.array([t.estimate.X for t in tracks]).reshape(n, 2, 2)
@@ -80,7 +70,7 @@ class ExtendedCheckpoint:
         arrays["candidates.time"] = np.array([c.time for c in cands], dtype=float)
         arrays["candidates.seen"] = np.array([c.seen for c in cands], dtype=np.int64)
         arrays["candidates.sums"] = np.array([c.sums for c in cands], dtype=float).reshape(k, 7)
-        _put_strings(arrays, "absorbing.ids", [tid for tid, _ in st.absorbing])
+        put_strings(arrays, "absorbing.ids", [tid for tid, _ in st.absorbing])
         arrays["absorbing.scans"] = np.array([s for _, s in st.absorbing], dtype=np.int64)
         values = {
             "time": st.time,
@@ -148,10 +138,7 @@ def read_state(section: StateSection, base: _State, id_prefix: str = "") -> _Sta
 
     if len(set(ids)) != n or not all(ids):
         raise bad("track ids must be unique and not empty")
-    own = [s.removeprefix(id_prefix) for s in ids if s.startswith(id_prefix)]
-    numbered = [int(s[1:]) for s in own if _NUMBERED_ID.match(s)]
-    if numbered and max(numbered) >= next_id:
-        raise bad(f"next_id {next_id} would give again the id {id_prefix}E{max(numbered)}")
+    check_id_counter(ids, next_id, id_prefix, "E", "peer/extended")
     if k and t is None:
         raise bad("clusters without the time of the last scan")
     if n:

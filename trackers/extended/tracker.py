@@ -68,9 +68,8 @@ from trackers.extended.random_matrix import (
     update_moments,
 )
 from trackers.extended.state import ExtendedCheckpoint, read_state
-from trackers.peers import PeerProposal, PointTrackView, ResolutionCell
+from trackers.peers import PeerProposal, PointTrackView, ResolutionCell, SavesImmutableState
 from trackers.scoring import initial_score
-from trackers.state import StateSection
 from trackers.types import Extent, Scan, TrackSnapshot
 
 __all__ = [
@@ -413,11 +412,13 @@ def _moves_with(
     return np.hypot(*(v - ve).T) <= spread + sigmas * sd
 
 
-class ExtendedTracker:
+class ExtendedTracker(SavesImmutableState):
     """Random-matrix tracks of extended objects and groups; a peer of the point tracker
     (:class:`trackers.peers.PeerTracker`). See the module docstring for the step."""
 
     kind = "extended"
+    _checkpoint_type = ExtendedCheckpoint
+    _read_state = staticmethod(read_state)
 
     def __init__(self, config: TrackerConfig | None = None, *, id_prefix: str = "") -> None:
         """``id_prefix`` goes before every new track's id (``{id_prefix}E3``)."""
@@ -442,29 +443,6 @@ class ExtendedTracker:
 
     def snapshot(self) -> tuple[TrackSnapshot, ...]:
         return tuple(_snapshot(t, t.time) for t in self._state.tracks)
-
-    # -- saving and restoring (:class:`~trackers.peers.PersistentTracker`) -------------------
-
-    def checkpoint(self) -> ExtendedCheckpoint:
-        """The committed state, to export later on any thread (free: it is immutable)."""
-        return ExtendedCheckpoint(self._state)
-
-    def export_state(self) -> StateSection:
-        return self.checkpoint().export()
-
-    def check_state(self, section: StateSection) -> object:
-        """A section that :meth:`export_state` wrote, read and checked under the
-        configuration in force; :class:`~trackers.state.StateError` when it cannot be used."""
-        return read_state(section, self._state, self.id_prefix)
-
-    def restore_state(self, checked: object) -> None:
-        """Put a state that :meth:`check_state` returned in place of the current one."""
-        if not isinstance(checked, _State):
-            raise TypeError("restore_state takes what check_state returned")
-        self._state = checked
-
-    def import_state(self, section: StateSection) -> None:
-        self.restore_state(self.check_state(section))
 
     def start(
         self,

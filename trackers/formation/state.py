@@ -10,7 +10,6 @@ under other motion models restart their modes from their combined estimates.
 
 from __future__ import annotations
 
-import re
 from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING
 
@@ -21,25 +20,16 @@ from trackers.state import (
     SectionReader,
     StateError,
     StateSection,
-    pack_strings,
+    check_id_counter,
     positive_definite,
+    put_string_groups,
+    put_strings,
 )
 
 if TYPE_CHECKING:
     from trackers.formation.tracker import _State
 
 __all__ = ["FormationCheckpoint", "read_state"]
-
-_NUMBERED_ID = re.compile(r"^F[0-9]{1,18}$")
-
-
-def _put_strings(arrays: dict[str, np.ndarray], name: str, items: list[str]) -> None:
-    arrays[f"{name}.utf8"], arrays[f"{name}.len"] = pack_strings(items)
-
-
-def _put_groups(arrays: dict[str, np.ndarray], name: str, groups: list[tuple[str, ...]]) -> None:
-    _put_strings(arrays, name, [s for g in groups for s in g])
-    arrays[f"{name}.count"] = np.array([len(g) for g in groups], dtype=np.int64)
 
 
 @dataclass(frozen=True, eq=False)
@@ -55,8 +45,8 @@ class FormationCheckpoint:
         fs = st.formations
         M, D = len(st.config.motion.models), STATE_DIM
         arrays: dict[str, np.ndarray] = {}
-        _put_strings(arrays, "formations.ids", [f.id for f in fs])
-        _put_groups(arrays, "formations.members", [f.members for f in fs])
+        put_strings(arrays, "formations.ids", [f.id for f in fs])
+        put_string_groups(arrays, "formations.members", [f.members for f in fs])
         for name in ("time", "started", "last_update"):
             arrays[f"formations.{name}"] = np.array([getattr(f, name) for f in fs], dtype=float)
         arrays["formations.scans"] = np.array([f.scans for f in fs], dtype=np.int64)
@@ -75,18 +65,18 @@ class FormationCheckpoint:
         leaving = stacked("leaving", (), float)
         arrays["members.is_leaving"] = np.isfinite(leaving)
         arrays["members.leaving"] = np.where(np.isfinite(leaving), leaving, 0.0)
-        _put_groups(arrays, "members.detection_ids", [d for f in fs for d in f.detection_ids])
+        put_string_groups(arrays, "members.detection_ids", [d for f in fs for d in f.detection_ids])
         groups = sorted(st.groups.items())
-        _put_groups(arrays, "groups.members", [k for k, _ in groups])
+        put_string_groups(arrays, "groups.members", [k for k, _ in groups])
         arrays["groups.first"] = np.array([v[0] for _, v in groups], dtype=float)
         arrays["groups.scans"] = np.array([v[1] for _, v in groups], dtype=np.int64)
         joining = sorted(st.joining.items())
-        _put_strings(arrays, "joining.formation", [k[0] for k, _ in joining])
-        _put_strings(arrays, "joining.track", [k[1] for k, _ in joining])
+        put_strings(arrays, "joining.formation", [k[0] for k, _ in joining])
+        put_strings(arrays, "joining.track", [k[1] for k, _ in joining])
         arrays["joining.first"] = np.array([v[0] for _, v in joining], dtype=float)
         arrays["joining.scans"] = np.array([v[1] for _, v in joining], dtype=np.int64)
-        _put_strings(arrays, "requests.ids", [r.id for r in st.requests])
-        _put_groups(arrays, "requests.members", [r.members for r in st.requests])
+        put_strings(arrays, "requests.ids", [r.id for r in st.requests])
+        put_string_groups(arrays, "requests.members", [r.members for r in st.requests])
         values = {
             "time": st.time,
             "next_id": st.next_id,
@@ -155,10 +145,7 @@ def read_state(section: StateSection, base: _State, id_prefix: str = "") -> _Sta
         raise bad("a member is in two formations, or twice in one")
     if len(set(req_ids) | set(fids)) != nr + nf or any(len(m) < 2 for m in req_members):
         raise bad("requests must have ids of their own and at least 2 members each")
-    own = [s.removeprefix(id_prefix) for s in fids + req_ids if s.startswith(id_prefix)]
-    numbered = [int(s[1:]) for s in own if _NUMBERED_ID.match(s)]
-    if numbered and max(numbered) >= next_id:
-        raise bad(f"next_id {next_id} would give again the id {id_prefix}F{max(numbered)}")
+    check_id_counter(fids + req_ids, next_id, id_prefix, "F", "peer/formation")
     if (nf or ng or nj) and t is None:
         raise bad("formations or counts without the time of the last scan")
     if n:

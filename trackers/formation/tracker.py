@@ -66,8 +66,7 @@ from trackers.filters.imm import (
 from trackers.formation.state import FormationCheckpoint, read_state
 from trackers.formation.template import cell_sizes, match_template
 from trackers.models.motion import ConstantVelocity, CoordinatedTurn, build_models
-from trackers.peers import PeerProposal, PointTrackState, PointTrackView
-from trackers.state import StateSection
+from trackers.peers import PeerProposal, PointTrackState, PointTrackView, SavesImmutableState
 from trackers.types import Scan, TrackSnapshot
 
 __all__ = ["KIND", "Formation", "FormationTracker", "formation_snapshots"]
@@ -314,11 +313,13 @@ def _joining(
     return out, ripe
 
 
-class FormationTracker:
+class FormationTracker(SavesImmutableState):
     """Formation tracks (paper 003); a peer of the point tracker
     (:class:`trackers.peers.PeerTracker`). See the module docstring for the step."""
 
     kind = KIND
+    _checkpoint_type = FormationCheckpoint
+    _read_state = staticmethod(read_state)
 
     def __init__(self, config: TrackerConfig | None = None, *, id_prefix: str = "") -> None:
         """``id_prefix`` goes before every new formation's id (``{id_prefix}F2``)."""
@@ -344,29 +345,6 @@ class FormationTracker:
         st = self._state
         names = st.config.motion.models
         return tuple(s for f in st.formations for s in formation_snapshots(f, names))
-
-    # -- saving and restoring (:class:`~trackers.peers.PersistentTracker`) -------------------
-
-    def checkpoint(self) -> FormationCheckpoint:
-        """The committed state, to export later on any thread (free: it is immutable)."""
-        return FormationCheckpoint(self._state)
-
-    def export_state(self) -> StateSection:
-        return self.checkpoint().export()
-
-    def check_state(self, section: StateSection) -> object:
-        """A section that :meth:`export_state` wrote, read and checked under the
-        configuration in force; :class:`~trackers.state.StateError` when it cannot be used."""
-        return read_state(section, self._state, self.id_prefix)
-
-    def restore_state(self, checked: object) -> None:
-        """Put a state that :meth:`check_state` returned in place of the current one."""
-        if not isinstance(checked, _State):
-            raise TypeError("restore_state takes what check_state returned")
-        self._state = checked
-
-    def import_state(self, section: StateSection) -> None:
-        self.restore_state(self.check_state(section))
 
     def members(self) -> dict[str, str]:
         """Member track id → its formation's id, for every formation and request."""

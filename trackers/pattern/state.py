@@ -12,7 +12,6 @@ kept as they are, as a configuration change keeps them.
 from __future__ import annotations
 
 import math
-import re
 from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING
 
@@ -24,8 +23,10 @@ from trackers.state import (
     SectionReader,
     StateError,
     StateSection,
-    pack_strings,
+    check_id_counter,
     positive_definite,
+    put_string_groups,
+    put_strings,
 )
 
 if TYPE_CHECKING:
@@ -33,17 +34,7 @@ if TYPE_CHECKING:
 
 __all__ = ["PatternCheckpoint", "read_state"]
 
-_NUMBERED_ID = re.compile(r"^B[0-9]{1,18}$")
 _ALGORITHMS = ("imm", "lmm")
-
-
-def _put_strings(arrays: dict[str, np.ndarray], name: str, items: list[str]) -> None:
-    arrays[f"{name}.utf8"], arrays[f"{name}.len"] = pack_strings(items)
-
-
-def _put_groups(arrays: dict[str, np.ndarray], name: str, groups: list[tuple[str, ...]]) -> None:
-    _put_strings(arrays, name, [s for g in groups for s in g])
-    arrays[f"{name}.count"] = np.array([len(g) for g in groups], dtype=np.int64)
 
 
 def _cat(parts: list[np.ndarray], tail: tuple[int, ...]) -> np.ndarray:
@@ -63,9 +54,9 @@ class PatternCheckpoint:
         tracks, sights = st.tracks, st.candidates
         n, D = len(tracks), STATE_DIM
         arrays: dict[str, np.ndarray] = {}
-        _put_strings(arrays, "tracks.ids", [t.id for t in tracks])
-        _put_groups(arrays, "tracks.shapes", [t.shapes for t in tracks])
-        _put_groups(arrays, "tracks.detection_ids", [t.detection_ids for t in tracks])
+        put_strings(arrays, "tracks.ids", [t.id for t in tracks])
+        put_string_groups(arrays, "tracks.shapes", [t.shapes for t in tracks])
+        put_string_groups(arrays, "tracks.detection_ids", [t.detection_ids for t in tracks])
         for name in ("time", "score", "peak", "created", "updated"):
             arrays[f"tracks.{name}"] = np.array([getattr(t, name) for t in tracks], dtype=float)
         arrays["tracks.hits"] = np.array([t.hits for t in tracks], dtype=np.int64)
@@ -105,7 +96,7 @@ class PatternCheckpoint:
         arrays["sightings.velocity"] = np.array(
             [s.velocity if s.velocity is not None else (0.0, 0.0) for s in sights], float
         ).reshape(k, 2)
-        _put_strings(arrays, "sensors.ids", [s for s, _ in st.sensor_times])
+        put_strings(arrays, "sensors.ids", [s for s, _ in st.sensor_times])
         arrays["sensors.time"] = np.array([t for _, t in st.sensor_times], dtype=float)
         values = {
             "time": st.time,
@@ -183,10 +174,7 @@ def read_state(section: StateSection, base: _State, id_prefix: str = "") -> _Sta
 
     if len(set(ids)) != n or not all(ids):
         raise bad("track ids must be unique and not empty")
-    own = [i.removeprefix(id_prefix) for i in ids if i.startswith(id_prefix)]
-    numbered = [int(i[1:]) for i in own if _NUMBERED_ID.match(i)]
-    if numbered and max(numbered) >= next_id:
-        raise bad(f"next_id {next_id} would give again the id {id_prefix}B{max(numbered)}")
+    check_id_counter(ids, next_id, id_prefix, "B", "peer/point_patterns")
     if (
         int(sizes.sum()) != nlp
         or int(filters.sum()) != nfil

@@ -73,8 +73,7 @@ from trackers.pattern.multiple_model import (
 )
 from trackers.pattern.registration import rotation, wrap_angle
 from trackers.pattern.state import PatternCheckpoint, read_state
-from trackers.peers import PeerProposal, PointTrackView
-from trackers.state import StateSection
+from trackers.peers import PeerProposal, PointTrackView, SavesImmutableState
 from trackers.types import Scan, TrackSnapshot
 
 __all__ = [
@@ -400,11 +399,13 @@ def _likeliest_assignment(
     return np.column_stack([rows[keep], cols[keep]]).astype(np.int64)
 
 
-class PatternTracker:
+class PatternTracker(SavesImmutableState):
     """Bending extended targets with known point patterns; a peer of the point tracker
     (:class:`trackers.peers.PeerTracker`). See the module docstring for the step."""
 
     kind = "point_patterns"
+    _checkpoint_type = PatternCheckpoint
+    _read_state = staticmethod(read_state)
 
     def __init__(self, config: TrackerConfig | None = None, *, id_prefix: str = "") -> None:
         """``id_prefix`` goes before every new track's id (``{id_prefix}B3``)."""
@@ -465,29 +466,6 @@ class PatternTracker:
 
     def snapshot(self) -> tuple[TrackSnapshot, ...]:
         return tuple(pattern_snapshot(t) for t in self._state.tracks)
-
-    # -- saving and restoring (:class:`~trackers.peers.PersistentTracker`) -------------------
-
-    def checkpoint(self) -> PatternCheckpoint:
-        """The committed state, to export later on any thread (free: it is immutable)."""
-        return PatternCheckpoint(self._state)
-
-    def export_state(self) -> StateSection:
-        return self.checkpoint().export()
-
-    def check_state(self, section: StateSection) -> object:
-        """A section that :meth:`export_state` wrote, read and checked under the
-        configuration in force; :class:`~trackers.state.StateError` when it cannot be used."""
-        return read_state(section, self._state, self.id_prefix)
-
-    def restore_state(self, checked: object) -> None:
-        """Put a state that :meth:`check_state` returned in place of the current one."""
-        if not isinstance(checked, _State):
-            raise TypeError("restore_state takes what check_state returned")
-        self._state = checked
-
-    def import_state(self, section: StateSection) -> None:
-        self.restore_state(self.check_state(section))
 
     def start(
         self,
