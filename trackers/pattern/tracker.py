@@ -44,7 +44,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from functools import lru_cache
 
 import numpy as np
@@ -54,8 +54,13 @@ from scipy.sparse.csgraph import connected_components, minimum_spanning_tree
 from scipy.spatial import cKDTree
 from scipy.stats import chi2
 
-from trackers.config import PointPatternConfig, TrackerConfig, TrackManagementConfig
-from trackers.extended.tracker import extent_ellipse
+from trackers.config import (
+    ExtendedConfig,
+    PointPatternConfig,
+    TrackerConfig,
+    TrackManagementConfig,
+)
+from trackers.extended.tracker import _grown, extent_ellipse
 from trackers.pattern.bending import (
     PrincipalModel,
     ProperModel,
@@ -73,7 +78,7 @@ from trackers.pattern.multiple_model import (
 )
 from trackers.pattern.registration import rotation, wrap_angle
 from trackers.pattern.state import PatternCheckpoint, read_state
-from trackers.peers import PeerProposal, PointTrackView, SavesImmutableState
+from trackers.peers import PeerProposal, PointTrackView, ResolutionCell, SavesImmutableState
 from trackers.types import Scan, TrackSnapshot
 
 __all__ = [
@@ -158,6 +163,9 @@ class _State:
     config: PointPatternConfig
     management: TrackManagementConfig
     modes: BendingModes | None
+    #: The extended section: its resolution distance and in-cell detection probability make
+    #: the pattern tracks' resolution cells.
+    hybrid: ExtendedConfig = field(default_factory=ExtendedConfig)
     tracks: tuple[PatternTrack, ...] = ()
     candidates: tuple[_Sighting, ...] = ()
     next_id: int = 1
@@ -222,6 +230,19 @@ def _shape_extent(pattern: np.ndarray, attitude: float) -> np.ndarray:
     k = float(np.max(np.einsum("ni,ij,nj->n", q, np.linalg.inv(C), q)))
     Rm = rotation(attitude)
     return Rm @ (max(k, 1.0) * C) @ Rm.T
+
+
+def _cells(snaps: Sequence[TrackSnapshot], ext: ExtendedConfig) -> tuple[ResolutionCell, ...]:
+    """The resolution cells of the pattern tracks (paper 002's hybridization, as for extended
+    tracks): each one's pattern ellipse about its position, grown by half of
+    ``extended.resolution_distance``; individual tracks inside have detection probability
+    ``extended.in_cell_pd`` (the target's own returns mask theirs)."""
+    half = 0.5 * ext.resolution_distance
+    return tuple(
+        ResolutionCell(np.asarray(s.position), _grown(s.extent.matrix, half)[0], ext.in_cell_pd)
+        for s in snaps
+        if s.extent is not None
+    )
 
 
 def pattern_snapshot(track: PatternTrack) -> TrackSnapshot:
@@ -412,7 +433,12 @@ class PatternTracker(SavesImmutableState):
         config = config or TrackerConfig()
         self.id_prefix = id_prefix
         cfg = config.point_patterns
-        self._state = _State(config=cfg, management=config.track_management, modes=modes_of(cfg))
+        self._state = _State(
+            config=cfg,
+            management=config.track_management,
+            modes=modes_of(cfg),
+            hybrid=config.extended,
+        )
 
     # -- the peer interface ------------------------------------------------------------------
 
@@ -439,6 +465,7 @@ class PatternTracker(SavesImmutableState):
             state,
             config=cfg,
             management=config.track_management,
+            hybrid=config.extended,
             modes=modes,
             tracks=tracks if modes is not None else state.tracks,
             candidates=() if modes is not state.modes else state.candidates,
@@ -599,11 +626,13 @@ class PatternTracker(SavesImmutableState):
             time=t,
             sensor_times=tuple(times.items()),
         )
+        snaps = tuple(pattern_snapshot(tr) for tr in kept)
         return PeerProposal(
             claimed=claimed,
             take=take,
-            tracks=tuple(pattern_snapshot(tr) for tr in kept),
+            tracks=snaps,
             deleted=tuple(deleted) + take,
+            cells=_cells(snaps, state.hybrid),
             state=new_state,
         )
 

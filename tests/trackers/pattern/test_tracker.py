@@ -152,3 +152,45 @@ def test_propose_changes_nothing_until_commit() -> None:
     assert [t.position for t in a.tracks] == [t.position for t in b.tracks]
     peer.commit(a)
     assert peer._state is a.state
+
+
+def test_a_pattern_track_has_a_resolution_cell_that_masks_point_tracks_in_it() -> None:
+    """Paper 002's hybridization for pattern tracks: each has a resolution cell (its pattern's
+    ellipse grown by half the resolution distance) with the extended section's in-cell
+    detection probability; a point track inside gets it, one outside keeps the sensor's."""
+    from trackers.peers import PointTrackView, combine_directives
+
+    run = bending_scenario(0)
+    patterns = {"first": run.patterns[0].tolist(), "second": run.patterns[1].tolist()}
+    config = TrackerConfig().merged({"point_patterns": {"patterns": patterns}})
+    p = TrackingPipeline.all_kinds(config)
+    for i in range(12):
+        p.process(run.to_scan(i))
+    peer = next(q for q in p.peers if isinstance(q, PatternTracker))
+    scan = run.to_scan(12)
+    prop = peer.propose(scan, p.point.predicted(scan.time))
+    (cell,) = prop.cells
+    (snap,) = prop.tracks
+    assert snap.extent is not None and cell.pd == config.extended.in_cell_pd
+    centre = np.array(snap.position)
+    # the cell reaches half a resolution distance beyond the pattern along its major axis
+    theta = snap.extent.orientation
+    reach = snap.extent.semi_axes[0] + 0.45 * config.extended.resolution_distance
+    edge = centre + reach * np.array([math.cos(theta), math.sin(theta)])
+    assert cell.contains(np.array([centre, edge])).all()
+    x = np.zeros((2, 5))
+    x[0, :2], x[1, :2] = centre, centre + np.array([500.0, 0.0])
+    points = PointTrackView(
+        time=scan.time,
+        ids=("T1", "T2"),
+        x=x,
+        P=np.tile(np.eye(5), (2, 1, 1)),
+        score=np.full(2, 20.0),
+        hits=np.full(2, 5),
+        confirmed=np.ones(2, dtype=bool),
+        created=np.zeros(2),
+        updated=np.full(2, scan.time),
+    )
+    directives = combine_directives((peer.kind,), (prop,), points)
+    assert directives.pd.get("T1") == pytest.approx(config.extended.in_cell_pd)
+    assert "T2" not in directives.pd
