@@ -20,6 +20,7 @@ import logging
 import math
 import threading
 import time
+from collections import Counter
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -28,7 +29,7 @@ from typing import Any
 from service import __version__
 from service.files import atomic_write, remove_stale_temporaries
 from trackers.pipeline import PipelineCheckpoint, TrackingPipeline
-from trackers.state import StateError, decode_state, encode_state
+from trackers.state import PipelineState, StateError, decode_state, encode_state
 from trackers.types import StepResult, TrackSnapshot
 
 __all__ = ["EngineCheckpoint", "Restored", "SaveFigures", "StateStore", "restored_result"]
@@ -89,6 +90,33 @@ class _NotUsed(Exception):
 
 def _number(value: Any) -> bool:
     return isinstance(value, int | float) and not isinstance(value, bool) and math.isfinite(value)
+
+
+def _warn_switched_off(pipeline: TrackingPipeline, state: PipelineState) -> None:
+    """Say which restored tracks the configuration in force ends at the next batch: those
+    of a track kind switched off (a state saved while ``--demo formation`` had formations
+    on, restored without it), or point-pattern tracks with no pattern configured."""
+    config = pipeline.config
+    off = {
+        "extended": not config.extended.enabled,
+        "formation": not config.formation.enabled,
+        "point_patterns": not (config.point_patterns.enabled and config.point_patterns.patterns),
+    }
+    counts = {
+        "extended": ("n_tracks", "extended tracks", "extended.enabled"),
+        "formation": ("n_formations", "formations", "formation.enabled"),
+        "point_patterns": ("n_tracks", "point-pattern tracks", "point_patterns"),
+    }
+    for kind, section in state.peers.items():
+        key, what, setting = counts.get(kind, ("", "", ""))
+        n = section.values.get(key) if key else None
+        if off.get(kind) and isinstance(n, int) and n > 0:
+            log.warning(
+                "%d restored %s end at the next batch: %s is off in the configuration in force",
+                n,
+                what,
+                setting,
+            )
 
 
 class StateStore:
@@ -162,17 +190,20 @@ class StateStore:
             raise _NotUsed(str(exc)) from None
         self._saved_seq = seq
         values = state.point.values
+        kinds = Counter(t.kind for t in pipeline.snapshot())
         log.info(
-            "tracker state restored from %s (saved %.1f s ago): %s tracks, %s two-point "
+            "tracker state restored from %s (saved %.1f s ago): %s tracks (%s), %s two-point "
             "candidates, last time %s, report seq %d, next id T%s",
             self.path,
             max(age, 0.0),
-            values.get("n_tracks"),
+            sum(kinds.values()),
+            ", ".join(f"{n} {kind}" for kind, n in sorted(kinds.items())) or "none",
             values.get("n_candidates"),
             state.last_time,
             seq,
             values.get("next_id"),
         )
+        _warn_switched_off(pipeline, state)
         return Restored(seq=seq, sensor_id=sensor_id, since_last_batch=float(since) + max(age, 0.0))
 
     # -- saving ---------------------------------------------------------------------------

@@ -324,3 +324,28 @@ def test_a_point_tracker_that_cannot_be_saved_turns_the_state_file_off(
     assert "the tracker state is not saved" in caplog.text
     engine.stop()
     assert not (tmp_path / "state.npz").exists()
+
+
+def test_the_restore_counts_every_kind_and_warns_of_tracks_the_configuration_ends(
+    tmp_path: Path, engines: Engines, caplog: pytest.LogCaptureFixture
+) -> None:
+    """Formations saved while on (as ``--demo formation`` has them), restored with them
+    off: the log counts the restored tracks of every kind and says the formations end at
+    the next batch, and why."""
+    from clients.scenarios.formation import environment_1, simulate_formations
+
+    caplog.set_level(logging.INFO, logger="service")
+    path = tmp_path / "state.npz"
+    on = TrackerConfig().merged({"formation": {"enabled": True}})
+    first = engines(path, config=on)
+    sims = simulate_formations(environment_1(seed=0, scans=30))
+    run_batches(first, [batch_payload(s) for s in sims[:75]], key=None)
+    formations = [t for t in first.tracks("all")["tracks"] if t["kind"] == "formation"]
+    assert len(formations) == 2
+    first.stop()
+    caplog.clear()
+    second = engines(path)
+    assert "2 formation" in caplog.text and "individual" in caplog.text
+    assert "2 restored formations end at the next batch: formation.enabled is off" in caplog.text
+    run_batches(second, [batch_payload(sims[75])], key=None)
+    assert not [t for t in second.tracks("all")["tracks"] if t["kind"] == "formation"]

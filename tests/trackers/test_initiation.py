@@ -449,7 +449,7 @@ ALLOWANCE = dict(pd=0.9, clutter_density=1e-6, max_speed=700.0, slow_fraction=0.
 def test_a_fresh_candidate_in_sparse_surroundings_may_fall_short_by_a_third_hit():
     """h = ln(P_D / (2π √|6 R_c| λ)) − 1 for a candidate at its first scan whose fast pairs
     cannot pass the floor (Δt = 4 s: ln(P_D ḡ_f / λ) = −4.9) and around which fewer
-    detections lie than half of what λ predicts within its reach (2.8 km: 24.6); else 0."""
+    detections lie than a fifth of what λ predicts within its reach (2.8 km: 24.6); else 0."""
     cand = candidates_at([[0.0, 0.0], [0.0, 0.0], [0.0, 0.0]], variance=900.0)
     cand = replace(cand, score=np.full(3, -2.3))
     fresh = np.array([True, False, True])
