@@ -65,6 +65,8 @@ SWITCH_INTERVAL = 0.001
 CONNECT_RETRY_MIN = 0.5
 CONNECT_RETRY_MAX = 5.0
 CONNECT_LOG_INTERVAL = 30.0
+#: Seconds between two looks at whether a session that must reach others still does.
+WATCH_INTERVAL = 2.0
 
 
 def _resolve_token(settings: Settings, source: str | None = None) -> str:
@@ -168,6 +170,7 @@ class ServiceRuntime:
         self._started = False
         self._stopping = threading.Event()
         self._connector: threading.Thread | None = None
+        self._watcher: threading.Thread | None = None
 
     def start(self) -> None:
         """Start the worker and open Zenoh. A listen endpoint that cannot be opened raises
@@ -273,6 +276,11 @@ class ServiceRuntime:
             )
         if s.demo:
             self._start_demo()
+        if s.zenoh_connect or s.zenoh_mode == "client":
+            self._watcher = threading.Thread(
+                target=self._watch, args=(zio,), name="zenoh-watch", daemon=True
+            )
+            self._watcher.start()
         log.info(
             "tracker-service %s ready: instance %s, key prefix %r",
             __version__,
@@ -280,12 +288,36 @@ class ServiceRuntime:
             s.key_prefix,
         )
 
+    def _watch(self, zio: ZenohIO) -> None:
+        """Log when the session stops reaching any router or peer, and when it reaches one
+        again (Zenoh reconnects by itself; ``/ready`` says so meanwhile)."""
+        reached = True
+        where = ",".join(self.settings.zenoh_connect) or "none"
+        while not self._stopping.wait(WATCH_INTERVAL):
+            session = zio.session
+            if session is None or zio.closed:
+                return
+            try:
+                n = len(list(session.info.routers_zid())) + len(list(session.info.peers_zid()))
+            except zenoh.ZError:  # closed under our feet
+                return
+            if reached and n == 0:
+                log.warning(
+                    "the Zenoh session reaches no router or peer any more (connect %s): no "
+                    "batch comes in and no report goes out until one answers",
+                    where,
+                )
+            elif not reached and n > 0:
+                log.info("the Zenoh session reaches %d router(s) or peer(s) again", n)
+            reached = n > 0
+
     def stop(self) -> None:
         self._stopping.set()
-        connector = self._connector
-        if connector is not None and connector is not threading.current_thread():
-            connector.join(CONNECT_RETRY_MAX + 5.0)
+        for thread in (self._connector, self._watcher):
+            if thread is not None and thread is not threading.current_thread():
+                thread.join(CONNECT_RETRY_MAX + 5.0)
         with self._lock:
+            self._watcher = None
             self._connector = None
             self.connecting = None
             if not self._started:

@@ -382,12 +382,29 @@ def test_client_waits_for_its_router(processes: list[ServiceProcess]) -> None:
             reports.close()
         finally:
             session.close()
+        # the router goes away and comes back: the service says so, and goes on
+        router.close()
+        wait_until(
+            lambda: httpx.get(svc.url + "/ready", timeout=5).status_code == 503,
+            timeout=15,
+            what="the service to see its router gone",
+        )
+        time.sleep(2.5)  # one look of the watch at least
+        router = _router(router_endpoint)
+        wait_until(
+            lambda: httpx.get(svc.url + "/ready", timeout=5).status_code == 200,
+            timeout=20,
+            what="the service to reach the router again",
+        )
+        time.sleep(2.5)
         code, _, _, err = svc.terminate()
     finally:
         router.close()
     assert code == 0, err
     assert "no Zenoh router answers" in err
     assert "connected to the Zenoh router" in err
+    assert "reaches no router or peer any more" in err
+    assert "reaches 1 router(s) or peer(s) again" in err
     assert "Traceback" not in err
 
 
