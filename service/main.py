@@ -294,13 +294,10 @@ class ServiceRuntime:
         reached = True
         where = ",".join(self.settings.zenoh_connect) or "none"
         while not self._stopping.wait(WATCH_INTERVAL):
-            session = zio.session
-            if session is None or zio.closed:
+            reach = zio.reach()
+            if reach is None:
                 return
-            try:
-                n = len(list(session.info.routers_zid())) + len(list(session.info.peers_zid()))
-            except zenoh.ZError:  # closed under our feet
-                return
+            n = sum(reach)
             if reached and n == 0:
                 log.warning(
                     "the Zenoh session reaches no router or peer any more (connect %s): no "
@@ -342,25 +339,19 @@ class ServiceRuntime:
         at least one router or peer; the tracker's worker running. ``detail`` names what is
         not ready."""
         s = self.settings
-        zio = self.zenoh
-        session = zio.session if zio is not None and not zio.closed else None
-        routers = peers = 0
-        if session is not None:
-            try:
-                routers = len(list(session.info.routers_zid()))
-                peers = len(list(session.info.peers_zid()))
-            except zenoh.ZError:  # closed under our feet
-                session = None
+        zio = self.zenoh  # read once: stop() may clear it meanwhile
+        reach = zio.reach() if zio is not None else None
+        routers, peers = reach or (0, 0)
         must_connect = bool(s.zenoh_connect) or s.zenoh_mode == "client"
-        connected = session is not None and (not must_connect or routers + peers > 0)
+        connected = reach is not None and (not must_connect or routers + peers > 0)
         running = self.engine.running
         problems = []
-        if session is None and self.connecting is not None:
+        if reach is None and self.connecting is not None:
             problems.append(
                 "waiting for a Zenoh router (connect "
                 f"{','.join(s.zenoh_connect) or 'none'}; {self.connecting})"
             )
-        elif session is None:
+        elif reach is None:
             problems.append("the Zenoh session is not open")
         elif not connected:
             problems.append(
@@ -372,7 +363,7 @@ class ServiceRuntime:
         out: dict[str, Any] = {
             "status": "ready" if not problems else "not_ready",
             "zenoh": {
-                "open": session is not None,
+                "open": reach is not None,
                 "connected": connected,
                 "mode": s.zenoh_mode,
                 "routers": routers,

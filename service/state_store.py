@@ -97,20 +97,32 @@ def _warn_switched_off(pipeline: TrackingPipeline, state: PipelineState) -> None
     of a track kind switched off (a state saved while ``--demo formation`` had formations
     on, restored without it), or point-pattern tracks with no pattern configured."""
     config = pipeline.config
-    off = {
-        "extended": not config.extended.enabled,
-        "formation": not config.formation.enabled,
-        "point_patterns": not (config.point_patterns.enabled and config.point_patterns.patterns),
-    }
-    counts = {
-        "extended": ("n_tracks", "extended tracks", "extended.enabled"),
-        "formation": ("n_formations", "formations", "formation.enabled"),
-        "point_patterns": ("n_tracks", "point-pattern tracks", "point_patterns"),
+    patterns = config.point_patterns
+    # kind: (switched off, the section's count, what it counts, the setting that says so)
+    ending = {
+        "extended": (
+            not config.extended.enabled,
+            "n_tracks",
+            "extended tracks",
+            "extended.enabled",
+        ),
+        "formation": (
+            not config.formation.enabled,
+            "n_formations",
+            "formations",
+            "formation.enabled",
+        ),
+        "point_patterns": (
+            not (patterns.enabled and patterns.patterns),
+            "n_tracks",
+            "point-pattern tracks",
+            "point_patterns",
+        ),
     }
     for kind, section in state.peers.items():
-        key, what, setting = counts.get(kind, ("", "", ""))
-        n = section.values.get(key) if key else None
-        if off.get(kind) and isinstance(n, int) and n > 0:
+        off, key, what, setting = ending.get(kind, (False, "", "", ""))
+        n = section.values.get(key)
+        if off and isinstance(n, int) and n > 0:
             log.warning(
                 "%d restored %s end at the next batch: %s is off in the configuration in force",
                 n,

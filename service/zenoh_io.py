@@ -220,6 +220,17 @@ class ZenohIO:
     def closed(self) -> bool:
         return self._closed
 
+    def reach(self) -> tuple[int, int] | None:
+        """The routers and peers the open session reaches now, or ``None`` when it is not
+        open (or was closed under our feet)."""
+        session = self.session
+        if session is None or self._closed:
+            return None
+        try:
+            return len(list(session.info.routers_zid())), len(list(session.info.peers_zid()))
+        except zenoh.ZError:
+            return None
+
     # -- callbacks (Zenoh threads: copy, hand off, return) ----------------------------------
 
     def _on_sample(self, sample: zenoh.Sample) -> None:

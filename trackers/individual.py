@@ -52,7 +52,13 @@ from trackers.models.motion import STATE_DIM, build_models
 from trackers.peers import PointDirectives, PointProposal, PointTrackState, PointTrackView
 from trackers.rows import RowArrays, sort_within_groups
 from trackers.scoring import hit_increment, initial_score, miss_increment, sequential_test
-from trackers.state import SectionReader, StateError, StateSection, put_strings
+from trackers.state import (
+    SectionReader,
+    StateError,
+    StateSection,
+    put_string_groups,
+    put_strings,
+)
 from trackers.types import Scan, StepResult, TrackSnapshot
 
 __all__ = ["Checkpoint", "IndividualTracker", "TrackArrays"]
@@ -506,7 +512,7 @@ class IndividualTracker:
             max_pairs=init.max_pairs_per_candidate,
             pd=pd,
             clutter_density=lam_fa,
-            min_score=np.maximum(claims, tm.delete_threshold),
+            min_score=tm.delete_threshold,
             group_fraction=init.group_fraction,
             group_velocity_std=init.group_velocity_std,
             rivals=claims,
@@ -655,10 +661,7 @@ class Checkpoint:
         groups = tr.detection_ids.tolist()
         arrays: dict[str, np.ndarray] = {}
         put_strings(arrays, "tracks.ids", tr.ids.tolist())
-        put_strings(arrays, "tracks.detection_ids", [d for g in groups for d in g])
-        arrays["tracks.detection_ids.count"] = np.fromiter(
-            map(len, groups), dtype=np.int64, count=len(groups)
-        )
+        put_string_groups(arrays, "tracks.detection_ids", groups)
         for name in _TRACK_NUMBERS:
             arrays[f"tracks.{name}"] = getattr(tr, name)
         for name in _CANDIDATE_NUMBERS:

@@ -661,10 +661,10 @@ def _update(
         )
         shared = _shared_modes(mu_all, muu, r, starts)
         x_all[r], P_all[r], mu_all[r] = xu, Pu, muu
-        own_mu = mu_all.copy()
         for sl, mu_f, own in shared:
+            kept = mu_all[own]  # a copy: their own posteriors
             mu_all[sl] = mu_f
-            mu_all[own] = own_mu[own]
+            mu_all[own] = kept
         score[r] += math.log(pd) - math.log1p(-min(pd, 1.0 - 1e-12)) + ll - math.log(lam)
         hits[r] += 1
         updated[r] = scan.time
