@@ -122,7 +122,6 @@ from dataclasses import dataclass
 from types import MappingProxyType
 
 import numpy as np
-from scipy.linalg import block_diag
 
 from trackers.filters.imm import MU_FLOOR
 from trackers.pattern.bending import (
@@ -266,7 +265,7 @@ def layered_transition_matrices(
     """
     sizes = tuple(int(s) for s in sizes)
     N = len(sizes)
-    M = int(np.prod(sizes))
+    M = math.prod(sizes)
     Pi = np.asarray(transition, dtype=float)
     if Pi.shape != (M, M):
         raise ValueError(f"transition must be ({M}, {M}) for sizes {sizes}, got {Pi.shape}")
@@ -275,7 +274,8 @@ def layered_transition_matrices(
         for m, s in zip(layer_probabilities, sizes, strict=True)
     ]
     plan = _tpm_plan(Pi.tobytes(), sizes)
-    tilde: list[np.ndarray] = [np.eye(s) for s in sizes]
+    # the first sweep (eqs. 23-24) reads only the layers before r, computed before it
+    tilde: list[np.ndarray] = [np.empty((0, 0))] * N
     for sweep in range(int(iterations) + 1):
         for r in range(N):
             C, expr, others_new = plan[min(sweep, 1)][r]
@@ -916,7 +916,9 @@ def lmm_step(
         est.filter_probabilities[r_g + r_p :],
     ]
     tilde = layered_transition_matrices(modes.transition, modes.sizes, mu_prev, iterations)
-    Pi = block_diag(*tilde)
+    Pi = np.zeros((K, K))  # the banks' matrices on the diagonal (scipy's block_diag: 20x slower)
+    for b, t in zip(starts.tolist(), tilde, strict=True):
+        Pi[b : b + len(t), b : b + len(t)] = t
     eye_g, eye_p, eye_s = np.eye(r_g), np.eye(r_p), np.eye(r_s)
 
     def weights(c_bar: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
