@@ -66,6 +66,10 @@ __all__ = ["Checkpoint", "IndividualTracker", "TrackArrays"]
 KIND = "individual"
 
 
+#: A tentative track is confirmed at its third detection at the earliest, whatever its score.
+MIN_CONFIRM_HITS = 3
+
+
 @dataclass(frozen=True, eq=False)
 class TrackArrays(RowArrays):
     """Every individual track, one row each.
@@ -362,7 +366,11 @@ class IndividualTracker:
         delete[n_old:] = False  # a track is never deleted in the scan that starts or adopts it
         delete[:n_old] |= rivals  # tentative, so not among the deleted ids
         deleted_ids = renamed + tuple(tracks.ids[delete & tracks.confirmed].tolist())
-        tracks = replace(tracks, confirmed=status.confirmed | (tracks.confirmed & ~delete))
+        # Two detections say that a target is there, not how it moves: a pair whose slow and
+        # fast readings both fit (200 m in 1 s under 40 m noise) may hold the wrong one, and
+        # confirmed, would be lost at the next detection and coast on as a second track.
+        newly = status.confirmed & ~tracks.confirmed & (tracks.hits >= MIN_CONFIRM_HITS)
+        tracks = replace(tracks, confirmed=newly | (tracks.confirmed & ~delete))
         tracks = _frozen(tracks.take(~delete))
 
         state = _State(
