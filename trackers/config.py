@@ -434,8 +434,9 @@ class FormationConfig:
 
     Confirmed individual tracks at least ``min_speed`` fast, at least ``min_members`` of them,
     each within ``max_spacing`` of another and moving within ``max_velocity_difference`` of
-    it, no two closer than ``extended.resolution_distance`` (closer ones are one unresolved
-    object, the extended tracker's), seen so for ``confirm_scans`` scans spanning at least
+    it, no two closer than ``extended.resolution_distance`` if they fly no faster than
+    ``extended.max_speed`` (closer ones are then one unresolved object, the extended
+    tracker's), seen so for ``confirm_scans`` scans spanning at least
     ``confirm_time``, become a formation. Its members are then updated with the detections
     that the template of the formation (the members' predicted positions on a grid, eq. 7)
     matches; their motion is the IMM of ``motion`` with the formation's own constant-velocity

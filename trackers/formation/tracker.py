@@ -285,7 +285,9 @@ def _joining(
         return {}, {}
     p = np.take(view.x[:, :2], rows, axis=0)
     v = np.take(view.x[:, 2:4], rows, axis=0)
-    d_res = config.extended.resolution_distance
+    d_res = np.where(
+        speed.take(rows) <= _extended_reach(config), config.extended.resolution_distance, 0.0
+    )
     near = np.zeros(rows.size, dtype=np.int64)
     moving_with: list[tuple[int, int]] = []
     for fi, f in enumerate(formations):
@@ -887,6 +889,14 @@ def _handed(f: Formation, rows: np.ndarray, t: float) -> tuple[PointTrackState, 
     return tuple(out)
 
 
+def _extended_reach(config: TrackerConfig) -> float:
+    """The highest speed of a group the extended tracker may hold (``extended.max_speed``;
+    -inf when extended tracking is off): only such groups need their members farther apart
+    than the resolution distance to be told from one unresolved object. A faster group is no
+    extended object, and its members, separate confirmed tracks, are resolved."""
+    return config.extended.max_speed if config.extended.enabled else -math.inf
+
+
 def _moving_together(
     view: PointTrackView,
     config: TrackerConfig,
@@ -895,9 +905,10 @@ def _moving_together(
     exclude: set[str],
 ) -> tuple[dict[tuple[str, ...], tuple[float, int]], list[list[int]]]:
     """Groups of confirmed tracks moving together now (each within ``max_spacing`` and
-    ``max_velocity_difference`` of another, at least ``min_speed`` fast, no two closer than
-    the resolution distance, at least ``min_members``), counted across scans; returns the
-    new counts and the rows of the groups ripe to become formations."""
+    ``max_velocity_difference`` of another, at least ``min_speed`` fast, at least
+    ``min_members``, and no two closer than the resolution distance if the group is slow
+    enough to be an extended object, :func:`_extended_reach`), counted across scans; returns
+    the new counts and the rows of the groups ripe to become formations."""
     cfg = config.formation
     ok = view.confirmed.copy()
     if len(view) == 0 or ok.sum() < cfg.min_members:
@@ -917,7 +928,7 @@ def _moving_together(
     if a.size == 0:
         return {}, []
     labels = component_labels(rows.size, a, b)
-    d_res = config.extended.resolution_distance
+    reach = _extended_reach(config)
     out: dict[tuple[str, ...], tuple[float, int]] = {}
     ripe: list[list[int]] = []
     # Only the groups large enough are looked at (most tracks are alone: one label each).
@@ -925,7 +936,10 @@ def _moving_together(
         local = np.flatnonzero(labels == g)
         d = _distances(p[local])
         np.fill_diagonal(d, np.inf)
-        if d.min() < d_res:
+        if (
+            float(np.mean(speed.take(rows[local]))) <= reach
+            and d.min() < config.extended.resolution_distance
+        ):
             continue  # closer than the resolution distance: one unresolved object
         key = tuple(sorted(view.ids[i] for i in rows[local].tolist()))
         first, n = groups.get(key, (t, 0))

@@ -66,9 +66,13 @@ def test_tracks_moving_together_become_a_formation_after_its_scans() -> None:
         if k < cfg.formation.confirm_scans - 1:
             assert ripe == [] and len(groups) == 1
     assert ripe == [[0, 1, 2]] and groups == {}
-    # closer than the resolution distance: one unresolved object, never a formation
+    # closer than the resolution distance and no faster than an extended object may be: one
+    # unresolved object, never a formation; as close but at 250 m/s: no convoy, resolved
     close = [(0.0, 0.0), (100.0, 0.0), (200.0, 0.0)]
-    assert _moving_together(_view(close, (250.0, 0.0)), cfg, {}, 0.0, set()) == ({}, [])
+    assert _moving_together(_view(close, (40.0, 0.0)), cfg, {}, 0.0, set()) == ({}, [])
+    assert len(_moving_together(_view(close, (250.0, 0.0)), cfg, {}, 0.0, set())[0]) == 1
+    off = cfg.merged({"extended": {"enabled": False}})
+    assert len(_moving_together(_view(close, (40.0, 0.0)), off, {}, 0.0, set())[0]) == 1
     # too slow, too few, or too far apart
     assert _moving_together(_view(spread, (10.0, 0.0)), cfg, {}, 0.0, set()) == ({}, [])
     assert _moving_together(_view(spread[:2], (250.0, 0.0)), cfg, {}, 0.0, set()) == ({}, [])
@@ -142,8 +146,9 @@ def test_a_track_moving_with_a_formation_joins_it_after_its_scans() -> None:
     cfg = ON
     members = _view([(0.0, 0.0), (300.0, 0.0), (600.0, 0.0)], (250.0, 0.0))
     f = _new_formation("F1", [0, 1, 2], members, cfg)
-    # T1 moves with it 400 m behind; T2 as fast but 40 m/s across; T3 inside the resolution
-    # distance of a member (one unresolved object); T4 too far
+    # T1 moves with it 400 m behind; T2 as fast but 40 m/s across; T3 71 m from a member,
+    # inside the resolution distance but at 250 m/s no extended object: it joins too; T4 too
+    # far
     others = _view([(-400.0, 0.0), (0.0, 500.0), (650.0, 50.0), (0.0, 3000.0)], (250.0, 0.0))
     x = others.x.copy()
     x[1, 3] = 40.0
@@ -153,10 +158,15 @@ def test_a_track_moving_with_a_formation_joins_it_after_its_scans() -> None:
         t = 1.0 * k
         counts, ripe = _joining(others, [f], cfg, counts, t, exclude=set())
         if k < cfg.formation.confirm_scans - 1:
-            assert ripe == {} and set(counts) == {("F1", "T1")}
-    assert ripe == {0: [0]} and counts == {}
+            assert ripe == {} and set(counts) == {("F1", "T1"), ("F1", "T3")}
+    assert ripe == {0: [0, 2]} and counts == {}
+    # at 40 m/s, T3 so close to a member is one unresolved object with it
+    slow = _view([(0.0, 0.0), (300.0, 0.0), (600.0, 0.0)], (40.0, 0.0))
+    g = _new_formation("F2", [0, 1, 2], slow, cfg)
+    near = _view([(650.0, 50.0)], (40.0, 0.0))
+    assert _joining(near, [g], cfg, {}, 0.0, exclude=set()) == ({}, {})
     # a track taken this scan by someone else is not counted
-    assert _joining(others, [f], cfg, {}, 0.0, exclude={"T1"}) == ({}, {})
+    assert _joining(others, [f], cfg, {}, 0.0, exclude={"T1", "T3"}) == ({}, {})
 
 
 def test_formations_are_off_by_default() -> None:
