@@ -841,20 +841,27 @@ class Engine:
         self._take_handed()
         try:
             scan = batch_to_scan(batch, pipeline.config.measurement.position_std)
-            if batch.cov is None and len(self._no_cov_sensors) < MAX_NO_COV_NOTES:
-                self._note_missing_covariance(batch, pipeline.config.measurement.position_std)
             t0 = time.perf_counter()
             result = pipeline.process(scan)
             ms = (time.perf_counter() - t0) * 1000.0
         except ScanRejected as exc:
             self._forget(item, batch)
-            self._refusals.reject(item, exc.reason, exc.detail, batch)
+            detail = exc.detail
+            if exc.reason == "out_of_sequence":
+                detail += (
+                    "; batches that reach the service later than others of their time are "
+                    "taken in time order when ingest.reorder_window (now "
+                    f"{self._applied_ingest.reorder_window:g} s) is at least that delay"
+                )
+            self._refusals.reject(item, exc.reason, detail, batch)
             return
         except Exception as exc:  # a tracker bug: report it, keep the worker alive
             log.exception("the tracker failed on a batch from %s", batch.sensor_id)
             self._forget(item, batch)
             self._refusals.reject(item, "internal_error", f"{type(exc).__name__}: {exc}", batch)
             return
+        if batch.cov is None and len(self._no_cov_sensors) < MAX_NO_COV_NOTES:
+            self._note_missing_covariance(batch, pipeline.config.measurement.position_std)
         self._seq += 1
         self._last_wall = time.monotonic()
         self._clocks.accepted(batch.sensor_id, scan.time)

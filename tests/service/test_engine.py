@@ -309,12 +309,23 @@ def test_a_sensor_without_covariances_is_told_once_what_is_assumed(
         return orjson.dumps({"sensor_id": sensor, "time": t, "detections": [det]})
 
     with caplog.at_level("WARNING", logger="service.engine"):
-        run_batches(
-            engine,
-            [batch("plain", 1.0, False), batch("plain", 2.0, False), batch("covs", 3.0, True)],
-            key=None,
-        )
+        run_batches(engine, [batch("covs", 3.0, True)], key=None)
+        # refused (out of sequence): says nothing of the sensor, whose batches are not used
+        (late,) = run_batches(engine, [batch("plain", 1.0, False)], key=None)
+        assert not late.accepted
+        assert not [r for r in caplog.records if "without a covariance" in r.getMessage()]
+        run_batches(engine, [batch("plain", 4.0, False), batch("plain", 5.0, False)], key=None)
     notes = [r.getMessage() for r in caplog.records if "without a covariance" in r.getMessage()]
     assert len(notes) == 1
     assert notes[0].startswith("sensor plain sends detections without a covariance")
     assert "measurement.position_std = 10 m" in notes[0]
+
+
+def test_a_batch_out_of_sequence_is_told_of_the_reorder_window(
+    engine: Engine, scans: list[Any]
+) -> None:
+    run_batches(engine, [batch_payload(s) for s in scans[:3]])
+    late = orjson.dumps({"sensor_id": "radar-1", "time": 0.5, "detections": []})
+    result = engine.submit(late, "radar-1", "test").result(timeout=10)
+    assert result.error is not None and result.error["error"] == "out_of_sequence"
+    assert "ingest.reorder_window (now 0 s)" in result.error["detail"]
