@@ -377,8 +377,9 @@ class ExtendedConfig:
     (1/4 for scatterers spread uniformly over the ellipse). Detections in a track's gate are
     split into subsets whose members are less than ``resolution_distance`` apart; the likeliest
     union of subsets is the track's. A cluster of at least ``min_detections`` detections, found
-    in ``birth_scans`` scans in a row spanning 10 s and moving as one (no faster than
-    ``max_speed``), starts a track. Individual tracks inside a track's resolution cell (its
+    in ``birth_scans`` scans in a row spanning ``birth_time`` and moving as one (no faster than
+    ``max_speed``), starts a track; until then an object's detections may confirm individual
+    tracks, which the new track absorbs. Individual tracks inside a track's resolution cell (its
     extent grown by half the resolution distance) have detection probability ``in_cell_pd``;
     those inside its extent that move with it (velocities within ``group_speed_spread``) for
     3 scans, and those its own detections started (in its cell, created since its cluster was
@@ -404,6 +405,13 @@ class ExtendedConfig:
     )
     birth_scans: int = _field(
         3, "scans in a row a cluster must be seen to start a track", ge=1, le=100
+    )
+    birth_time: float = _field(
+        10.0,
+        "shortest time a cluster must be seen to start a track, s (independent targets close"
+        " together look like a group for a few fast scans)",
+        ge=0,
+        le=1e6,
     )
     max_speed: float = _field(
         60.0, "fastest group or object the birth search follows, m/s", gt=0, le=1e4

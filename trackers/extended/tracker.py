@@ -30,7 +30,7 @@ Each scan (:meth:`ExtendedTracker.propose`, then :meth:`~ExtendedTracker.commit`
 6. **Birth.** Detections claimed by no extended track form clusters (resolution distance).
    A cluster of at least ``min_detections`` detections that are either explained by no
    confirmed individual track or by confirmed tracks moving together, seen in
-   ``birth_scans`` scans in a row spanning at least :data:`BIRTH_MIN_SPAN` seconds and moving
+   ``birth_scans`` scans in a row spanning at least ``birth_time`` seconds and moving
    at no more than ``max_speed``, starts a tentative extended track.
 
 Tracks can also be started by hand (:meth:`ExtendedTracker.start`), from a centroid,
@@ -73,7 +73,6 @@ from trackers.scoring import initial_score
 from trackers.types import Extent, Scan, TrackSnapshot
 
 __all__ = [
-    "BIRTH_MIN_SPAN",
     "SPLIT_SCANS",
     "ExtendedTrack",
     "ExtendedTracker",
@@ -86,9 +85,6 @@ SPLIT_SCANS = 3
 #: Scans in a row a confirmed individual track must be inside a confirmed extended track's
 #: extent and moving with it before it is absorbed (a vehicle passing alongside is not).
 ABSORB_SCANS = 3
-#: Shortest time (s) over which a cluster must be seen before it starts a track: at a fast
-#: revisit, independent targets that happen to be close look like a group for a few scans.
-BIRTH_MIN_SPAN = 10.0
 #: Gate (χ²₂, 99 %) of a confirmed individual track that keeps its detections for it.
 POINT_GATE = 9.21
 #: Weight of the latest scan's detection count in the expected count γ.
@@ -706,7 +702,7 @@ class ExtendedTracker(SavesImmutableState):
             run = None if cand is None else cand.seen_again(centroid, t)
             if run is None or math.hypot(*run.slope()) > cfg.max_speed:
                 candidates.append(_Candidate.first(centroid, t))
-            elif run.seen >= cfg.birth_scans and t - run.first_time >= BIRTH_MIN_SPAN:
+            elif run.seen >= cfg.birth_scans and t - run.first_time >= cfg.birth_time:
                 ripe.append((subsets[k], run))
             else:
                 candidates.append(run)
@@ -966,7 +962,7 @@ def _hybridize(
             tracks[pos] = track = replace(track, visitors=visitors)
         if not track.confirmed:
             continue
-        established = track.hits >= cfg.birth_scans and t - track.created >= BIRTH_MIN_SPAN
+        established = track.hits >= cfg.birth_scans and t - track.created >= cfg.birth_time
         cells.append(ResolutionCell(center=est.x[:2], matrix=cell, pd=cfg.in_cell_pd))
         # tracks that its own detections started since its cluster was first seen:
         # in its cell, never seen coming, no faster than a group
