@@ -408,7 +408,8 @@ class ExtendedConfig:
     )
     birth_time: float = _field(
         10.0,
-        "shortest time a cluster must be seen to start a track, s (independent targets close"
+        "shortest time a cluster must be seen to start a track, and a new track's age before"
+        " it absorbs the individual tracks moving with it, s (independent targets close"
         " together look like a group for a few fast scans)",
         ge=0,
         le=1e6,
@@ -442,9 +443,9 @@ class FormationConfig:
 
     Confirmed individual tracks at least ``min_speed`` fast, at least ``min_members`` of them,
     each within ``max_spacing`` of another and moving within ``max_velocity_difference`` of
-    it, no two closer than ``extended.resolution_distance`` if they fly no faster than
-    ``extended.max_speed`` (closer ones are then one unresolved object, the extended
-    tracker's), seen so for ``confirm_scans`` scans spanning at least
+    it, no two closer than ``extended.resolution_distance`` if extended tracking is on and they
+    fly no faster than ``extended.max_speed`` (closer ones are then one unresolved object, the
+    extended tracker's), seen so for ``confirm_scans`` scans spanning at least
     ``confirm_time``, become a formation. Its members are then updated with the detections
     that the template of the formation (the members' predicted positions on a grid, eq. 7)
     matches; their motion is the IMM of ``motion`` with the formation's own constant-velocity

@@ -17,7 +17,9 @@ One step, for a scan at time t with detections z_j (covariances R_j):
    pair with them, and with those a tentative track took when the pair scores higher, each
    pair kept starting a tentative track; each free detection becomes a candidate. With
    ``single_point`` each free detection starts a tentative track scored L(1) = ln(λ_nt/λ_fa);
-7. confirmation and deletion by the sequential test, the drop-from-peak and coasting rules.
+7. confirmation and deletion by the sequential test (a track is confirmed at its third
+   detection at the earliest, :data:`MIN_CONFIRM_HITS`), the drop-from-peak and coasting
+   rules.
 """
 
 from __future__ import annotations
@@ -66,7 +68,8 @@ __all__ = ["Checkpoint", "IndividualTracker", "TrackArrays"]
 KIND = "individual"
 
 
-#: A tentative track is confirmed at its third detection at the earliest, whatever its score.
+#: The sequential test confirms a tentative track at its third detection at the earliest,
+#: whatever its score (tracks handed in by peers keep their status).
 MIN_CONFIRM_HITS = 3
 
 

@@ -268,7 +268,8 @@ def _joining(
 ) -> tuple[dict[tuple[str, str], tuple[float, int]], dict[int, list[int]]]:
     """Confirmed individual tracks moving with a formation: at least ``min_speed`` fast,
     within ``max_spacing`` of one of its members and ``max_velocity_difference`` of that
-    member's velocity, no closer than the resolution distance to any member, and within
+    member's velocity, no closer than the resolution distance to any member if the formation
+    is slow enough to be an extended object (:func:`_extended_reach`), and within
     ``max_spacing`` of no other formation's member; counted across scans by (formation id,
     track id). A member confirmed after its formation formed (or one handed back that
     rejoins) so becomes a member after ``confirm_scans`` scans spanning ``confirm_time``.
@@ -285,13 +286,13 @@ def _joining(
         return {}, {}
     p = np.take(view.x[:, :2], rows, axis=0)
     v = np.take(view.x[:, 2:4], rows, axis=0)
-    d_res = np.where(
-        speed.take(rows) <= _extended_reach(config), config.extended.resolution_distance, 0.0
-    )
+    reach = _extended_reach(config)
     near = np.zeros(rows.size, dtype=np.int64)
     moving_with: list[tuple[int, int]] = []
     for fi, f in enumerate(formations):
         x, _ = f.combined()
+        slow = float(np.mean(np.hypot(x[:, 2], x[:, 3]))) <= reach
+        d_res = config.extended.resolution_distance if slow else 0.0
         d = np.hypot(p[:, None, 0] - x[None, :, 0], p[:, None, 1] - x[None, :, 1])
         nearest = np.argmin(d, axis=1)
         d_min = d[np.arange(rows.size), nearest]

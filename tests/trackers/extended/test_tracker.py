@@ -53,6 +53,32 @@ def test_a_moving_cluster_becomes_one_confirmed_extended_track():
     assert all(np.hypot(*(np.array(t.position) - centre)) > 300 for t in individual)
 
 
+@pytest.mark.parametrize(("birth_time", "by"), [(10.0, 14.0), (4.0, 6.0)])
+def test_an_object_starts_its_track_after_birth_time(birth_time, by):
+    """A 200 m x 40 m object with 5-15 returns a scan at T = 2 s in sparse clutter: its
+    extended track is confirmed no sooner than ``birth_time`` after it was first seen, and by
+    ``by``; until then its returns confirm individual tracks (absorbed when it starts), none
+    with 4 s."""
+    cfg = TrackerConfig().merged({"extended": {"birth_time": birth_time}})
+    p = TrackingPipeline.all_kinds(cfg)
+    rng = np.random.default_rng(3)
+    first, most = None, 0
+    for k in range(10):
+        t = 2.0 * k
+        centre = np.array([-500.0 + 8.0 * t, 0.0])
+        n = int(rng.integers(5, 16))
+        z = centre + rng.uniform(-1, 1, (n, 2)) * (100.0, 20.0) + rng.normal(0, 5.0, (n, 2))
+        z = np.vstack([z, rng.uniform(-2000, 2000, (rng.poisson(4), 2))])
+        R5 = np.tile(25.0 * np.eye(2), (len(z), 1, 1))
+        r = p.process(Scan("s", t, z, R5, pd=0.9, clutter_density=4 / 4000.0**2))
+        if first is None and any(x.kind == "extended" for x in r.confirmed()):
+            first = t
+        on = [x for x in r.confirmed() if x.kind == "individual"]
+        most = max(most, sum(np.hypot(*(np.array(x.position) - centre)) < 300 for x in on))
+    assert first is not None and birth_time <= first <= by
+    assert (most == 0) if birth_time < 10 else (most > 3)
+
+
 def test_nothing_is_born_from_uniform_clutter_or_when_disabled():
     rng = np.random.default_rng(8)
     p = TrackingPipeline.all_kinds()
