@@ -38,8 +38,8 @@ from service.api import api_router
 from service.api.methods import AllowedMethods
 from service.api.view import VIEW_DIR
 from service.api.view import router as view_router
-from service.config_store import load_config_file
-from service.config_tree import ConfigDocument, ConfigError, ConfigPatch
+from service.config_store import config_changes, load_config_file
+from service.config_tree import ConfigDocument, ConfigError, ConfigPatch, config_document
 from service.engine import Engine
 from service.files import remove_stale_temporaries
 from service.keys import Keys, local_endpoints
@@ -413,7 +413,17 @@ def create_app(settings: Settings | None = None, token_source: str | None = None
         loaded = load_config_file(settings.config_file, ingest_defaults)
     tracker_config, ingest = loaded if loaded else (TrackerConfig(), ingest_defaults)
     if loaded:
-        log.info("tracker configuration loaded from %s", settings.config_file)
+        changed = config_changes(
+            config_document(TrackerConfig(), ingest_defaults), config_document(*loaded)
+        )
+        log.info(
+            "tracker configuration loaded from %s: %s",
+            settings.config_file,
+            f"{len(changed)} setting(s) differ from the defaults ({'; '.join(changed)}); a "
+            "fresh --state-dir starts from the defaults"
+            if changed
+            else "the defaults",
+        )
     if settings.demo and settings.demo_scenario == "formation":
         tracker_config = tracker_config.merged({"formation": {"enabled": True}})
         log.info("demo formation: formation tracking switched on (formation.enabled)")

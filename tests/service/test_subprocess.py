@@ -219,7 +219,13 @@ def test_start_says_where_token_and_configuration_are(
     # the next start loads it; --config-file none neither loads nor saves
     again = _start(processes, "--state-dir", str(state), env={"TRACKER_API_TOKEN": "s3cret"})
     assert httpx.get(again.url + "/api/v1/config").json()["motion"]["q_cv"] == 1.0
-    assert f"configuration file {conf} (loaded)" in again.terminate()[3]
+    err = again.terminate()[3]
+    assert f"configuration file {conf} (loaded)" in err
+    # and says what in it differs from the defaults (a newcomer's "default" run kept changes)
+    assert (
+        f"tracker configuration loaded from {conf}: 1 setting(s) differ from the defaults "
+        "(motion.q_cv 0.5 -> 1.0); a fresh --state-dir starts from the defaults"
+    ) in err
     off = _start(processes, "--state-dir", str(state), "--config-file", "none", "--api-token", "x")
     assert httpx.get(off.url + "/api/v1/config").json()["motion"]["q_cv"] == 0.5
     r = httpx.patch(
