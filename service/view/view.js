@@ -77,7 +77,9 @@
     ctx.globalAlpha = style.alpha;
     drawTrail(t, style.trail);
     ctx.lineWidth = 1.5;
-    drawVelocity(t, sx, sy, style.color);
+    // a tentative track's velocity comes from two or three detections, often a pair of false
+    // alarms read as a fast target: its vector would only clutter the picture
+    if (style.label) drawVelocity(t, sx, sy, style.color);
     ctx.fillStyle = style.color;
     ctx.beginPath();
     ctx.arc(sx, sy, style.radius, 0, 2 * Math.PI);
