@@ -25,7 +25,6 @@ One step, for a scan at time t with detections z_j (covariances R_j):
 from __future__ import annotations
 
 import math
-import re
 from collections.abc import Sequence
 from dataclasses import dataclass, fields, replace
 
@@ -58,6 +57,7 @@ from trackers.state import (
     SectionReader,
     StateError,
     StateSection,
+    check_id_counter,
     put_string_groups,
     put_strings,
 )
@@ -775,10 +775,7 @@ def _import(section: StateSection, config: TrackerConfig, id_prefix: str = "") -
 
     if len(set(ids)) != n or not all(ids):
         raise bad("track ids must be unique and not empty")
-    own = [s.removeprefix(id_prefix) for s in ids if s is not None and s.startswith(id_prefix)]
-    numbered = [int(s[1:]) for s in own if _NUMBERED_ID.match(s)]
-    if numbered and max(numbered) >= next_id:
-        raise bad(f"next_id {next_id} would give again the id {id_prefix}T{max(numbered)}")
+    check_id_counter(ids, next_id, id_prefix, "T", "point")
     origins = np.concatenate([tracks.origin, candidates.origin])
     if origins.size and int(origins.max()) >= next_origin:
         raise bad(f"next_origin {next_origin} is not above every origin ({int(origins.max())})")
@@ -813,9 +810,6 @@ def _import(section: StateSection, config: TrackerConfig, id_prefix: str = "") -
         next_id=next_id,
         next_origin=next_origin,
     )
-
-
-_NUMBERED_ID = re.compile(r"^T[0-9]{1,18}$")
 
 
 def _remoded(tracks: TrackArrays, config: TrackerConfig) -> TrackArrays:

@@ -159,6 +159,34 @@ def check_id_counter(
         )
 
 
+def check_tracks(
+    where: str,
+    ids: Sequence[str],
+    next_id: int,
+    prefix: str,
+    letter: str,
+    *,
+    created: np.ndarray,
+    updated: np.ndarray,
+    time: np.ndarray,
+    score: np.ndarray,
+    peak: np.ndarray,
+) -> None:
+    """The checks every saved table of tracks passes, :class:`StateError` naming ``where``:
+    the ids unique and not empty, the id counter ahead of them (:func:`check_id_counter`),
+    ``created <= updated <= time`` for each track (its own time: one started by hand may be
+    ahead of the last scan) and its peak score not below its score."""
+    if len(set(ids)) != len(ids) or not all(ids):
+        raise StateError(f"{where}: track ids must be unique and not empty")
+    check_id_counter(ids, next_id, prefix, letter, where)
+    if (created > updated).any() or (updated > time).any():
+        raise StateError(
+            f"{where}: track times must satisfy created <= updated <= the track's time"
+        )
+    if (peak < score).any():
+        raise StateError(f"{where}: a track's peak score is below its score")
+
+
 # -- reading a section ----------------------------------------------------------------------
 
 

@@ -20,7 +20,7 @@ from trackers.state import (
     SectionReader,
     StateError,
     StateSection,
-    check_id_counter,
+    check_tracks,
     positive_definite,
     put_string_groups,
     put_strings,
@@ -136,19 +136,21 @@ def read_state(section: StateSection, base: _State, id_prefix: str = "") -> _Sta
     def bad(detail: str) -> StateError:
         return StateError(f"peer/extended: {detail}")
 
-    if len(set(ids)) != n or not all(ids):
-        raise bad("track ids must be unique and not empty")
-    check_id_counter(ids, next_id, id_prefix, "E", "peer/extended")
+    check_tracks(
+        "peer/extended",
+        ids,
+        next_id,
+        id_prefix,
+        "E",
+        created=floats["created"],
+        updated=floats["updated"],
+        time=floats["time"],
+        score=floats["score"],
+        peak=floats["peak"],
+    )
     if k and t is None:
         raise bad("clusters without the time of the last scan")
     if n:
-        # each track's own time: one started by hand may be ahead of the last scan
-        if (floats["created"] > floats["updated"]).any() or (
-            floats["updated"] > floats["time"]
-        ).any():
-            raise bad("track times must satisfy created <= updated <= the track's time")
-        if (floats["peak"] < floats["score"]).any():
-            raise bad("a track's peak score is below its score")
         if (alpha <= 0).any() or (floats["gamma"] <= 0).any():
             raise bad("extent degrees of freedom and expected counts must be positive")
         if not (positive_definite(P) and positive_definite(X)):

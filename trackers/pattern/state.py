@@ -23,7 +23,7 @@ from trackers.state import (
     SectionReader,
     StateError,
     StateSection,
-    check_id_counter,
+    check_tracks,
     positive_definite,
     put_string_groups,
     put_strings,
@@ -172,9 +172,18 @@ def read_state(section: StateSection, base: _State, id_prefix: str = "") -> _Sta
     def bad(detail: str) -> StateError:
         return StateError(f"peer/point_patterns: {detail}")
 
-    if len(set(ids)) != n or not all(ids):
-        raise bad("track ids must be unique and not empty")
-    check_id_counter(ids, next_id, id_prefix, "B", "peer/point_patterns")
+    check_tracks(
+        "peer/point_patterns",
+        ids,
+        next_id,
+        id_prefix,
+        "B",
+        created=f["created"],
+        updated=f["updated"],
+        time=f["time"],
+        score=f["score"],
+        peak=f["peak"],
+    )
     if (
         int(sizes.sum()) != nlp
         or int(filters.sum()) != nfil
@@ -187,11 +196,6 @@ def read_state(section: StateSection, base: _State, id_prefix: str = "") -> _Sta
     if k and (s_shape >= len(saved_patterns)).any():
         raise bad("a sighting's shape is not one of the saved patterns")
     if n:
-        # each track's own time: one started by hand may be before the first scan or ahead
-        if (f["created"] > f["updated"]).any() or (f["updated"] > f["time"]).any():
-            raise bad("track times must satisfy created <= updated <= the track's time")
-        if (f["peak"] < f["score"]).any():
-            raise bad("a track's peak score is below its score")
         if not (positive_definite(P) and positive_definite(fP)):
             raise bad("a covariance is not symmetric positive definite")
         if not (_probabilities_ok(layer_p) and _probabilities_ok(fp)):
