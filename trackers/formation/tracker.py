@@ -399,7 +399,9 @@ class FormationTracker(SavesImmutableState):
                 return PeerProposal(
                     claimed=claimed, state=replace(st, time=t, groups={}, joining={})
                 )
-            handed = tuple(_handed(f, np.arange(len(f)), t) for f in st.formations)
+            # Handed back at the scan's time: the members' states predicted to it first.
+            formations = _predicted(st.formations, _models(config), config, t)
+            handed = tuple(_handed(f, np.arange(len(f)), t) for f in formations)
             return PeerProposal(
                 claimed=claimed,
                 hand_back=tuple(s for group in handed for s in group),

@@ -307,6 +307,32 @@ def test_switching_formations_off_hands_every_member_back() -> None:
     assert members <= live
 
 
+def test_members_handed_back_by_switching_formations_off_go_on_being_updated() -> None:
+    """The members are handed back at the scan's time, not where the formation's last update
+    left them (a newcomer's three jets at 200 m/s, T = 1 s: handed back 200 m behind, never
+    updated again, doubled by new tracks and deleted)."""
+    p = TrackingPipeline.all_kinds(ON)
+    rng = np.random.default_rng(1)
+    slots = np.array([[0.0, 0.0], [400.0, 0.0], [200.0, 350.0]])
+    v = np.array([200.0, 0.0])
+    R = np.tile(np.eye(2) * 20.0**2, (3, 1, 1))
+    members: set[str] = set()
+    for k in range(60):
+        if k == 40:
+            members = {m for f in _formation_peer(p).formations for m in f.members}
+            assert len(members) == 3
+            p.reconfigure(TrackerConfig())
+        truth = slots + v * k
+        result = p.process(Scan("r", float(k), truth + rng.normal(0.0, 20.0, (3, 2)), R))
+        if k >= 40:
+            confirmed = [t for t in result.confirmed() if t.kind == "individual"]
+            assert {t.id for t in confirmed} == members  # none lost, none doubled
+            for t in confirmed:
+                d = np.hypot(*(truth - np.asarray(t.position)).T)
+                assert d.min() < 80.0, (k, t.id, d.min())
+                assert k - t.updated <= 1.0
+
+
 @pytest.mark.parametrize("turn", [0.1, 0.15, 0.2])
 def test_a_formation_turned_since_its_prediction_matches_every_member(turn):
     """Four members in line (±300 m, ±900 m) whose detections have turned about the centre
