@@ -486,6 +486,15 @@ class Engine:
             except ValueError as exc:
                 raise CommandRefused(str(exc)) from None
             self._refresh_state(t)
+            log.info(
+                "%s track %s started by hand at t=%s: position (%.1f, %.1f) m, "
+                "velocity (%.1f, %.1f) m/s",
+                kind,
+                snap.id,
+                t,
+                *snap.position,
+                *snap.velocity,
+            )
             return track_to_dict(snap)
 
         return self.call_in_worker(command, timeout)
@@ -564,7 +573,8 @@ class Engine:
         more than ``ingest.max_time_jump`` after it; before the first batch ``at`` is
         required). Returns the new Track; the latest report (same ``seq``, not published
         again) lists it at once. Raises :class:`CommandRefused` (nothing changed) for
-        unusable values or when extended tracking is switched off, and
+        unusable values, a speed above ``extended.max_speed``, a centroid inside an extended
+        track's extent, or when extended tracking is switched off, and
         :class:`EngineUnavailable` as :meth:`call_in_worker`."""
         pos, vel, ext = _extended_prior(position, velocity, extent)
 
@@ -586,8 +596,9 @@ class Engine:
         """Ask for a formation of the live individual tracks ``members`` on the worker
         (:meth:`FormationTracker.request`): it is formed at the next batch from those still
         live then. Returns the formation's Track as of now. Raises :class:`CommandRefused`
-        (nothing changed) for an unknown id, one already in a formation, a repeated id, or
-        when formation tracking is switched off, and :class:`EngineUnavailable` as
+        (nothing changed) for an unknown id, a tentative track, one already in a formation, a
+        repeated id, members farther apart than ``formation.max_spacing``, or when formation
+        tracking is switched off, and :class:`EngineUnavailable` as
         :meth:`call_in_worker`."""
 
         def command(pipeline: TrackingPipeline) -> dict[str, Any]:
@@ -599,6 +610,11 @@ class Engine:
                 snap = tracker.request(members, pipeline.point.predicted(last))
             except ValueError as exc:
                 raise CommandRefused(str(exc)) from None
+            log.info(
+                "formation %s asked for by hand: members %s, formed at the next batch",
+                snap.id,
+                ", ".join(members),
+            )
             return track_to_dict(snap)
 
         return self.call_in_worker(command, timeout)

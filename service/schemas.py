@@ -43,6 +43,7 @@ __all__ = [
     "MAX_ID_LENGTH",
     "MAX_SEMI_AXIS",
     "SENSOR_ID_PATTERN",
+    "TRACK_KINDS",
     "BatchError",
     "DetectionBatchIn",
     "DetectionIn",
@@ -64,6 +65,7 @@ __all__ = [
     "decode_formation",
     "decode_pattern_track",
     "format_validation_error",
+    "parse_kinds",
     "valid_sensor_id",
 ]
 
@@ -584,6 +586,21 @@ class ExtentOut(BaseModel):
     matrix: list[list[float]] = Field(description="2x2 extent matrix, m²")
     semi_axes: list[float] = Field(description="ellipse semi-axes, m")
     orientation: float = Field(description="rad")
+
+
+TRACK_KINDS = ("individual", "extended", "formation")
+
+
+def parse_kinds(value: str) -> set[str]:
+    """``individual,extended`` -> the set of kinds; an unknown kind (they are lower case)
+    raises ``ValueError`` naming the ones there are (it matched no track, silently)."""
+    kinds = {k.strip() for k in value.split(",") if k.strip()}
+    unknown = sorted(kinds.difference(TRACK_KINDS))
+    if unknown:
+        raise ValueError(
+            f"kind: each one of {', '.join(TRACK_KINDS)}, got {', '.join(map(repr, unknown))}"
+        )
+    return kinds
 
 
 class TrackOut(BaseModel):

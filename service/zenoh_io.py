@@ -26,6 +26,7 @@ import zenoh
 from service.convert import dumps
 from service.keys import Keys, make_config
 from service.payload import too_large_detail
+from service.schemas import parse_kinds
 
 if TYPE_CHECKING:
     from service.scale_out import ScaleOut
@@ -43,7 +44,8 @@ _STATUSES = ("confirmed", "tentative", "all")
 def parse_selector_filters(parameters: str) -> tuple[str, set[str] | None]:
     """``status=all;kind=individual,extended`` (Zenoh selector parameters) -> filters, as the
     REST query parameters of ``GET /api/v1/tracks``. Other parameters are ignored; a
-    ``status`` other than ``confirmed``, ``tentative`` or ``all`` raises ``ValueError``."""
+    ``status`` other than ``confirmed``, ``tentative`` or ``all``, or an unknown ``kind``
+    (:func:`parse_kinds`), raises ``ValueError``."""
     status = "confirmed"
     kinds: set[str] | None = None
     for part in parameters.replace("&", ";").split(";"):
@@ -56,7 +58,7 @@ def parse_selector_filters(parameters: str) -> tuple[str, set[str] | None]:
                 raise ValueError(f"status: one of {', '.join(_STATUSES)}, got {value!r}")
             status = value
         elif key == "kind" and value:
-            kinds = {k for k in value.split(",") if k}
+            kinds = parse_kinds(value) or None
     return status, kinds
 
 

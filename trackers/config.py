@@ -306,7 +306,9 @@ class TrackManagementConfig:
     ``ln((1 − β)/α)`` and the deletion threshold ``ln(β/(1 − α))`` with α =
     ``p_false_confirm`` and β = ``p_true_delete``. A confirmed track is also deleted when its
     score falls ``delete_drop_from_peak`` below its peak, or when it has had no detection for
-    ``max_coast_time`` seconds.
+    ``max_coast_time`` seconds; time spent inside an extended track's resolution cell counts
+    at the rate ``extended.in_cell_pd / pd`` there (the object hides it: a vehicle beside a
+    convoy coasts that much longer).
     """
 
     pd: float = _field(0.9, "detection probability, when a batch carries none", gt=0, le=1)
@@ -323,7 +325,11 @@ class TrackManagementConfig:
         le=1e6,
     )
     max_coast_time: float = _field(
-        10.0, "a confirmed track is deleted after this long without a detection, s", gt=0, le=1e6
+        10.0,
+        "a confirmed track is deleted after this long without a detection, s (inside an "
+        "extended track's resolution cell the time counts at the rate extended.in_cell_pd / pd)",
+        gt=0,
+        le=1e6,
     )
 
     def __post_init__(self) -> None:

@@ -10,7 +10,7 @@ from fastapi.concurrency import run_in_threadpool
 from fastapi.responses import Response
 
 from service.api.deps import EngineDep, FastJSONResponse, federation_of
-from service.schemas import TrackOut, TrackReportOut
+from service.schemas import TrackOut, TrackReportOut, parse_kinds
 
 __all__ = ["router"]
 
@@ -24,7 +24,8 @@ router = APIRouter(prefix="/tracks", tags=["tracks"])
     description=(
         "The Track report of the last processed batch. By default it holds the confirmed "
         "tracks, as published on `{prefix}/tracks`; `status=all` adds the tentative tracks, "
-        "`status=tentative` keeps only those; `kind` (comma-separated) keeps those kinds. "
+        "`status=tentative` keeps only those; `kind` (comma-separated) keeps those kinds "
+        "(`individual`, `extended`, `formation`; another gets a 422). "
         "With the setting `federate` (scale-out), every instance's tracks, gathered over "
         "Zenoh within `federate_timeout`, each with its `instance`, and `instances` saying "
         "which answered."
@@ -41,7 +42,10 @@ async def list_tracks(
         Query(description="individual, extended or formation (comma-separated)"),
     ] = None,
 ) -> Response:
-    kinds = {k.strip() for k in kind.split(",") if k.strip()} if kind else None
+    try:
+        kinds = parse_kinds(kind) or None if kind else None
+    except ValueError as exc:
+        raise HTTPException(status_code=422, detail=str(exc)) from None
     federation = federation_of(request)
     if federation is not None:
         answer = await run_in_threadpool(federation.federated_tracks, status, kinds)

@@ -12,7 +12,7 @@ import httpx
 import numpy as np
 import pytest
 
-from service.engine import Engine, EngineUnavailable
+from service.engine import CommandRefused, Engine, EngineUnavailable
 from tests.conftest import RunningService
 
 from .helpers import ListSink, batch_payload, check_track, run_batches
@@ -160,6 +160,7 @@ BAD: list[tuple[str, Any, str]] = [
     ("not JSON", b"{oops", "invalid JSON"),
     ("time before the last batch", {"time": -1.0}, "time:"),
     ("time far ahead", {"time": 1e6}, "time:"),
+    ("faster than max_speed", {"velocity": [5000.0, 0.0]}, "velocity: 5000 m/s is faster"),
 ]
 
 
@@ -223,15 +224,21 @@ def test_the_stopped_service_answers_503(service: RunningService) -> None:
 # -- the engine's commands ----------------------------------------------------------------
 
 
-def test_a_command_on_an_idle_engine_completes(engine: Engine) -> None:
+def test_a_command_on_an_idle_engine_completes(
+    engine: Engine, caplog: pytest.LogCaptureFixture
+) -> None:
     t0 = time.monotonic()
     assert engine.call_in_worker(lambda p: p.last_time, timeout=5.0) is None
     worker = engine.call_in_worker(lambda p: threading.current_thread().name)
     assert worker == "tracker-engine"
-    track = engine.start_extended_track((0.0, 0.0), (1.0, 0.0), np.eye(2) * 100.0, at=3.0)
+    with caplog.at_level("INFO", logger="service.engine"):
+        track = engine.start_extended_track((0.0, 0.0), (1.0, 0.0), np.eye(2) * 100.0, at=3.0)
     assert track["id"] == "E1" and track["time"] == 3.0
     assert time.monotonic() - t0 < 2.0
     assert engine.track("E1") == track
+    assert "extended track E1 started by hand at t=3.0: position (0.0, 0.0) m" in caplog.text
+    with pytest.raises(CommandRefused, match="inside the extent of extended track 'E1'"):
+        engine.start_extended_track((5.0, 0.0), (1.0, 0.0), np.eye(2) * 100.0, at=3.0)
 
 
 def test_the_worker_goes_on_after_a_failed_command(

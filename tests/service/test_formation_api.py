@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 import httpx
@@ -22,9 +23,15 @@ def _feed(service: RunningService, sims: list[Any]) -> None:
     assert all(r.accepted for r in results), [r for r in results if not r.accepted][:1]
 
 
-def _confirmed_individual(http: httpx.Client) -> list[str]:
+def _confirmed_individual(http: httpx.Client) -> tuple[list[str], list[str]]:
+    """The confirmed individual tracks near the first one (one formation's), and the others."""
     tracks = http.get("/api/v1/tracks", params={"kind": "individual"}).json()["tracks"]
-    return [t["id"] for t in tracks]
+    x0, y0 = tracks[0]["position"]
+    near = [math.hypot(t["position"][0] - x0, t["position"][1] - y0) < 5000.0 for t in tracks]
+    return (
+        [t["id"] for t, n in zip(tracks, near, strict=True) if n],
+        [t["id"] for t, n in zip(tracks, near, strict=True) if not n],
+    )
 
 
 def test_a_token_is_required_and_formations_are_off_by_default(service: RunningService) -> None:
@@ -45,8 +52,8 @@ def test_form_by_ids_then_members_carry_the_formation_id(service: RunningService
         r = http.post(URL, json={"members": ["T1", "T2"]}, headers=service.auth)
         assert r.status_code == 422 and "before the first batch" in r.json()["detail"]
         _feed(service, sims[:30])
-        ids = _confirmed_individual(http)
-        assert len(ids) >= 3
+        ids, far = _confirmed_individual(http)
+        assert len(ids) >= 3 and far
         for body, field in (
             ({}, "members"),
             ({"members": ["T1"]}, "members"),
@@ -54,6 +61,7 @@ def test_form_by_ids_then_members_carry_the_formation_id(service: RunningService
             ({"members": [ids[0], ids[1]], "extra": 1}, "extra"),
             ({"members": [ids[0], "T999"]}, "T999"),
             ({"members": [ids[0], ids[0]]}, "twice"),
+            ({"members": [ids[0], far[0]]}, "formation.max_spacing"),
         ):
             r = http.post(URL, json=body, headers=service.auth)
             assert r.status_code == 422 and field in r.json()["detail"], (body, r.text)

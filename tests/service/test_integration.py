@@ -82,6 +82,9 @@ def test_tracks_over_zenoh_queryable_liveliness_and_rest(
         replies = list(peer.get("tracking/state/tracks?status=bogus", timeout=5))
         assert len(replies) == 1 and replies[0].err is not None
         assert "status: one of confirmed, tentative, all" in replies[0].err.payload.to_string()
+        replies = list(peer.get("tracking/state/tracks?kind=Extended", timeout=5))
+        assert len(replies) == 1 and replies[0].err is not None
+        assert "got 'Extended'" in replies[0].err.payload.to_string()
         assert {t["status"] for t in every["tracks"]} == {"confirmed", "tentative"}
 
         # the liveliness token
@@ -107,6 +110,8 @@ def test_tracks_over_zenoh_queryable_liveliness_and_rest(
             r = http.get("/api/v1/tracks", params={"status": "tentative"})
             assert r.json()["tracks"] == tentative
             assert http.get("/api/v1/tracks", params={"status": "bogus"}).status_code == 422
+            r = http.get("/api/v1/tracks", params={"kind": "individual,bogus"})
+            assert r.status_code == 422 and "got 'bogus'" in r.json()["detail"]
             one = last["tracks"][0]
             assert http.get(f"/api/v1/tracks/{one['id']}").json() == one
             assert http.get(f"/api/v1/tracks/{tentative[0]['id']}").json() == tentative[0]

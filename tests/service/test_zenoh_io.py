@@ -25,3 +25,10 @@ def test_selector_filters(parameters: str, expected: tuple[str, set[str] | None]
 def test_selector_filters_refuse_an_unknown_status() -> None:
     with pytest.raises(ValueError, match="status: one of confirmed, tentative, all, got 'bogus'"):
         parse_selector_filters("status=bogus")
+
+
+@pytest.mark.parametrize("kind", ["bogus", "Extended", "individual,points"])
+def test_selector_filters_refuse_an_unknown_kind(kind: str) -> None:
+    """An unknown kind matched no track, silently (a newcomer's ``kind=Extended``)."""
+    with pytest.raises(ValueError, match="kind: each one of individual, extended, formation"):
+        parse_selector_filters(f"kind={kind}")

@@ -452,7 +452,9 @@ class ExtendedTracker(SavesImmutableState):
     ) -> ExtendedTrack:
         """Start a confirmed extended track by hand at ``time`` (not before the last scan), from
         a centroid, velocity and extent prior (``extent`` the 2x2 shape matrix, m²). Returns
-        it; raises ``ValueError`` for unusable values and changes nothing then."""
+        it; raises ``ValueError`` and changes nothing for unusable values, a speed above
+        ``max_speed``, or a centroid inside a confirmed track's extent (predicted to
+        ``time``): that object is tracked already."""
         state = self._state
         if not math.isfinite(time) or (state.time is not None and time < state.time):
             raise ValueError(f"time: must be finite and not before {state.time}, got {time!r}")
@@ -466,6 +468,12 @@ class ExtendedTracker(SavesImmutableState):
         x = np.concatenate([np.reshape(position, 2), np.reshape(velocity, 2)]).astype(float)
         if not np.isfinite(x).all():
             raise ValueError("position and velocity: must be finite numbers")
+        speed = math.hypot(x[2], x[3])
+        if speed > state.config.max_speed:
+            raise ValueError(
+                f"velocity: {speed:.6g} m/s is faster than extended.max_speed "
+                f"({state.config.max_speed:.6g} m/s), the fastest group the tracker holds"
+            )
         X = np.asarray(extent, dtype=float).reshape(2, 2)
         if not (
             np.isfinite(X).all()
@@ -474,6 +482,16 @@ class ExtendedTracker(SavesImmutableState):
             and X[0, 0] * X[1, 1] - X[0, 1] * X[1, 0] > 0
         ):
             raise ValueError("extent: must be a symmetric positive definite 2x2 matrix")
+        for other in state.tracks:
+            if not other.confirmed:
+                continue
+            est_o = other.estimate
+            d = x[:2] - (est_o.x[:2] + est_o.x[2:4] * (time - other.time))
+            if float(d @ np.linalg.solve(est_o.X, d)) <= 1.0:
+                raise ValueError(
+                    f"position: inside the extent of extended track {other.id!r}, which "
+                    "already holds this object"
+                )
         P = np.diag([position_std**2] * 2 + [velocity_std**2] * 2)
         est = ExtendedEstimate(x=x, P=P, X=X, alpha=10.0)
         track = ExtendedTrack(

@@ -359,8 +359,8 @@ class FormationTracker(SavesImmutableState):
         """Ask for a formation of the point tracks ``member_ids`` (live in ``view``, the point
         tracks as they are now): it is formed at the next scan from those still live then.
         Returns the formation's track as of now; raises ``ValueError`` naming the problem (an
-        unknown id, one already in a formation, fewer than two, one twice) and changes
-        nothing then."""
+        unknown id, a tentative track, one already in a formation, fewer than two, one twice,
+        members not linked by steps of at most ``max_spacing``) and changes nothing then."""
         st = self._state
         if not st.config.formation.enabled:
             raise ValueError("formation tracking is switched off (formation.enabled)")
@@ -376,6 +376,24 @@ class FormationTracker(SavesImmutableState):
                 raise ValueError(f"members: track {tid!r} is already in formation {taken[tid]!r}")
             if tid not in index:
                 raise ValueError(f"members: no live individual track {tid!r}")
+            if not view.confirmed[index[tid]]:
+                raise ValueError(f"members: track {tid!r} is tentative, not confirmed")
+        p = np.take(view.x[:, :2], [index[tid] for tid in ids], axis=0)
+        spacing = st.config.formation.max_spacing
+        a, b = pairs_within(p, np.full(len(ids), spacing), p)
+        labels = component_labels(len(ids), a, b)
+        if (labels != labels[0]).any():
+            d = _distances(p)[labels == labels[0]][:, labels != labels[0]]
+            i, j = np.unravel_index(int(np.argmin(d)), d.shape)
+            near, far = (
+                np.flatnonzero(labels == labels[0])[i],
+                np.flatnonzero(labels != labels[0])[j],
+            )
+            raise ValueError(
+                f"members: tracks {ids[near]!r} and {ids[far]!r} are {d[i, j]:.0f} m apart and "
+                f"no chain of members closer than formation.max_spacing ({spacing:g} m) "
+                "links them"
+            )
         fid = f"{self.id_prefix}F{st.next_id}"
         rows = [index[tid] for tid in ids]
         snap = formation_snapshots(

@@ -107,6 +107,14 @@ def test_a_track_started_by_hand_is_confirmed_and_takes_its_detections():
         peer.start(-1.0, [0, 0], [0, 0], np.eye(2))
     with pytest.raises(ValueError):
         peer.start(10.0, [0, 0], [0, 0], -np.eye(2))
+    # A newcomer's 5000 m/s start (coasted off to 18 km) and five starts of one object.
+    with pytest.raises(ValueError, match=r"faster than extended\.max_speed"):
+        peer.start(5.0, [5000.0, 0.0], [5000.0, 0.0], np.eye(2) * 100.0)
+    with pytest.raises(ValueError, match=f"inside the extent of extended track '{track.id}'"):
+        peer.start(5.0, [120.0, 5.0], [10.0, 0.0], np.diag([150.0**2, 15.0**2]))
+    assert [t.id for t in peer.tracks] == [track.id]
+    other = peer.start(5.0, [1000.0, 0.0], [10.0, 0.0], np.diag([150.0**2, 15.0**2]))
+    assert [t.id for t in peer.tracks] == [track.id, other.id]
 
 
 def test_a_small_object_does_not_take_a_buoy_its_resolution_subset_chains_it_to():

@@ -272,13 +272,25 @@ def test_a_formation_asked_for_by_ids_is_formed_at_the_next_scan() -> None:
         p.process(sim.to_scan())
     view = p.point.predicted(p.last_time)
     confirmed = [tid for tid, c in zip(view.ids, view.confirmed, strict=True) if c]
-    assert len(confirmed) >= 3
+    p_of = {tid: view.x[i, :2] for i, tid in enumerate(view.ids)}
+    far = [t for t in confirmed if np.hypot(*(p_of[t] - p_of[confirmed[0]])) > 5000.0]
+    confirmed = [t for t in confirmed if t not in far]  # one formation's members
+    assert len(confirmed) >= 3 and far
     with pytest.raises(ValueError, match="at least 2"):
         peer.request(confirmed[:1], view)
     with pytest.raises(ValueError, match="twice"):
         peer.request([confirmed[0], confirmed[0]], view)
     with pytest.raises(ValueError, match="no live individual track 'T999'"):
         peer.request([confirmed[0], "T999"], view)
+    # A newcomer's formation of a jet and a tentative track on a ship 4.5 km away.
+    small = _view([(0.0, 0.0), (300.0, 0.0), (4500.0, 0.0)], (200.0, 0.0), p.last_time)
+    small = dataclasses.replace(small, confirmed=np.array([True, False, True]))
+    with pytest.raises(ValueError, match="track 'T2' is tentative, not confirmed"):
+        peer.request(["T1", "T2"], small)
+    with pytest.raises(ValueError, match="'T1' and 'T3' are 4500 m apart and no chain"):
+        peer.request(["T1", "T3"], small)
+    with pytest.raises(ValueError, match=r"no chain of members closer than formation\.max_spac"):
+        peer.request([confirmed[0], far[0]], view)
     snap = peer.request(confirmed[:2], view)
     assert snap.kind == "formation" and snap.members == tuple(confirmed[:2])
     with pytest.raises(ValueError, match="already in formation"):
