@@ -391,7 +391,9 @@ class ExtendedConfig:
     3 scans, and those its own detections started (in its cell, created since its cluster was
     first seen, never seen coming from outside), are absorbed. A track is deleted like an
     individual one (the sequential test of ``track_management``) or after ``max_coast_time``
-    without detections.
+    without detections. For each batch the resolution distance in force is at most
+    ``resolution_noise_factor`` standard deviations of its detections' position noise, and
+    ``group_speed_spread`` shrinks by the same ratio (a camera's pedestrians are no group).
     """
 
     enabled: bool = _field(True, "track extended objects and groups alongside individual targets")
@@ -402,6 +404,14 @@ class ExtendedConfig:
     )
     resolution_distance: float = _field(
         200.0, "detections closer than this belong to one subset, m", gt=0, le=1e5
+    )
+    resolution_noise_factor: float = _field(
+        40.0,
+        "the resolution distance in force for a batch is at most this many standard deviations"
+        " of its detections' position noise (their median), so that a fine sensor (a camera's"
+        " 0.3 m) resolves targets metres apart; 0: resolution_distance always",
+        ge=0,
+        le=1e6,
     )
     gate_probability: float = _field(
         0.9999, "probability that a detection of the object falls in its gate", gt=0, lt=1

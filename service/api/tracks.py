@@ -7,6 +7,7 @@ from typing import Annotated, Literal
 
 from fastapi import APIRouter, HTTPException, Query, Request
 from fastapi.concurrency import run_in_threadpool
+from fastapi.exceptions import RequestValidationError
 from fastapi.responses import Response
 
 from service.api.deps import EngineDep, FastJSONResponse, federation_of
@@ -44,8 +45,9 @@ async def list_tracks(
 ) -> Response:
     try:
         kinds = parse_kinds(kind) or None if kind else None
-    except ValueError as exc:
-        raise HTTPException(status_code=422, detail=str(exc)) from None
+    except ValueError as exc:  # as FastAPI answers a bad status: a 422 in its schema
+        error = {"type": "value_error", "loc": ["query", "kind"], "msg": str(exc), "input": kind}
+        raise RequestValidationError([error]) from None
     federation = federation_of(request)
     if federation is not None:
         answer = await run_in_threadpool(federation.federated_tracks, status, kinds)

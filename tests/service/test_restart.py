@@ -156,6 +156,7 @@ def test_an_extended_track_survives_a_restart(
     after = httpx.get(again.url + "/api/v1/tracks", params=params, timeout=5).json()["tracks"]
     assert after == before
     with httpx.Client(base_url=again.url, timeout=10) as http:
-        r = http.post("/api/v1/tracks/extended", json=body, headers=auth)
+        elsewhere = {**body, "position": [9000.0, 9000.0]}  # not inside the first one
+        r = http.post("/api/v1/tracks/extended", json=elsewhere, headers=auth)
         assert r.status_code == 201 and r.json()["id"] != started["id"]
     assert again.terminate()[0] == 0

@@ -77,6 +77,7 @@ __all__ = [
     "ExtendedTrack",
     "ExtendedTracker",
     "extent_ellipse",
+    "resolution_in_force",
     "snapshot_of",
 ]
 
@@ -96,6 +97,33 @@ BIRTH_VELOCITY_STD = 5.0
 #: Velocity std (m/s) per axis of a track split off another: measured from the centroid of a
 #: few detections over one scan.
 SPLIT_VELOCITY_STD = 10.0
+
+
+def resolution_in_force(cfg: ExtendedConfig, R: np.ndarray) -> ExtendedConfig:
+    """``cfg`` with the resolution distance in force for a batch whose detections have the
+    position covariances ``R (n, 2, 2)``, and the group speed spread scaled with it:
+
+        d_res = min(resolution_distance, k σ̃),   σ̃ = median_i sqrt(λ_max(R_i)),
+        spread = group_speed_spread · d_res / resolution_distance,
+
+    ``k`` = ``resolution_noise_factor`` (0, or no detections: the configured values). The
+    configured distance suits a radar (tens of metres of noise; a convoy's vehicles 30-150 m
+    apart are one group); a camera with 0.3 m of noise sees pedestrians metres apart as
+    separate targets, not as one object 200 m across. The spread scales with the distance
+    (members of a group stay within it of each other for as long): pedestrians walking
+    1-2 m/s in different directions are within 3 m/s of each other, yet no group."""
+    k = cfg.resolution_noise_factor
+    if k <= 0 or len(R) == 0:
+        return cfg
+    sigma = float(np.median(np.sqrt(max_eigenvalue_2x2(R))))
+    d = k * sigma
+    if d >= cfg.resolution_distance:
+        return cfg
+    return replace(
+        cfg,
+        resolution_distance=d,
+        group_speed_spread=cfg.group_speed_spread * d / cfg.resolution_distance,
+    )
 
 
 @dataclass(frozen=True, eq=False)
@@ -511,7 +539,7 @@ class ExtendedTracker(SavesImmutableState):
 
     def propose(self, scan: Scan, view: PointTrackView) -> PeerProposal:
         state = self._state
-        cfg, tm = state.config, state.management
+        cfg, tm = resolution_in_force(state.config, scan.R), state.management
         t = float(scan.time)
         claimed = np.zeros(scan.size, dtype=bool)
         if not cfg.enabled:
@@ -642,7 +670,7 @@ class ExtendedTracker(SavesImmutableState):
             else tree.query_pairs(cfg.resolution_distance, output_type="ndarray")
         )
         born, candidates, next_id = self._births(
-            scan, claimed, pairs, point_gates, state, next_id, t
+            scan, claimed, pairs, point_gates, state, cfg, next_id, t
         )
         for _, rows in born:
             claimed[rows] = True
@@ -666,11 +694,11 @@ class ExtendedTracker(SavesImmutableState):
 
     # -- births --------------------------------------------------------------------------------
 
-    def _births(self, scan, claimed, pairs, point_gates, state, next_id, t):
+    def _births(self, scan, claimed, pairs, point_gates, state, cfg, next_id, t):
         """New tracks from the clusters of the unclaimed detections; ``pairs`` the pairs of the
         scan's detections closer than the resolution distance (from the k-d tree the tracks
-        used), if known."""
-        cfg, tm = state.config, state.management
+        used), if known; ``cfg`` the configuration with the resolution distance in force."""
+        tm = state.management
         free = ~claimed
         if pairs is None and not claimed.any():
             i, j = close_pairs(scan.z, cfg.resolution_distance)
@@ -767,8 +795,9 @@ def _group_clusters(
     """The detections of each cluster (rows of the scan) that a group may hold: those no
     confirmed individual track explains, and those of confirmed tracks that move together
     (within ``group_speed_spread`` of the median velocity of the cluster's tracks, two
-    tracks at least). With ``since`` (one time per cluster), only tracks created before it
-    explain that cluster's detections. All clusters at once, in array operations."""
+    tracks at least). With ``since`` (one time per cluster), a track created since explains
+    that cluster's detections only if it is resolved (its gate holds one detection, which no
+    other gate holds). All clusters at once, in array operations."""
     if pg.det.size == 0:
         return clusters
     K, m = len(clusters), pg.rows.size
@@ -777,7 +806,14 @@ def _group_clusters(
     c = which[pg.det]
     inside = c >= 0
     if since is not None:
-        inside[inside] = pg.created[pg.trk[inside]] < since[c[inside]]
+        # A track the cluster's own detections started explains its detection only when it
+        # is resolved: the one detection in its gate, in no other track's gate (independent
+        # targets seen together from the start; not an object's scattered returns).
+        n_det = np.bincount(pg.det, minlength=pg.size)
+        n_trk = np.bincount(pg.trk, minlength=pg.rows.size)
+        det, trk = pg.det[inside], pg.trk[inside]
+        resolved = (np.take(n_det, det) == 1) & (np.take(n_trk, trk) == 1)
+        inside[inside] = (np.take(pg.created, trk) < since[c[inside]]) | resolved
     if not inside.any():
         return clusters
     c, det, trk = c[inside], pg.det[inside], pg.trk[inside]

@@ -3,13 +3,14 @@ harbour scenario of clients/scenarios/extended.py (the convoy's targets are not 
 benchmarks/extended.py)."""
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
 
 from clients.scenarios.extended import convoy_scenario, harbour_scenario, run_figures
 from trackers.config import TrackerConfig
-from trackers.extended.tracker import ExtendedTracker, extent_ellipse
+from trackers.extended.tracker import ExtendedTracker, extent_ellipse, resolution_in_force
 from trackers.pipeline import TrackingPipeline
 from trackers.types import Scan
 
@@ -299,3 +300,53 @@ def test_a_birth_candidate_moves_along_the_least_squares_line_of_its_centroids()
     # σ_v = σ_c / √Σ(τ − τ̄)² = 100 / √125
     assert run.velocity_std(100.0) == pytest.approx(100.0 / math.sqrt(125.0))
     assert _Candidate.first((1.0, 2.0), 3.0).velocity == pytest.approx([0.0, 0.0])
+
+
+def test_the_resolution_in_force_follows_the_position_noise():
+    cfg = TrackerConfig().extended
+    camera = resolution_in_force(cfg, np.tile(np.eye(2) * 0.3**2, (5, 1, 1)))
+    assert camera.resolution_distance == pytest.approx(12.0)
+    assert camera.group_speed_spread == pytest.approx(3.0 * 12.0 / 200.0)
+    radar = np.array([np.diag([5.0**2, 5.0**2]), np.diag([50.0**2, 1.0])])
+    assert resolution_in_force(cfg, radar) is cfg  # 40 sigma above 200 m: as configured
+    assert resolution_in_force(cfg, np.zeros((0, 2, 2))) is cfg
+    off = replace(cfg, resolution_noise_factor=0.0)
+    assert resolution_in_force(off, np.tile(np.eye(2) * 0.09, (5, 1, 1))) is off
+
+
+def _walkers(seed: int, T: float = 0.1, duration: float = 25.0):
+    """Eight pedestrians at 1-2 m/s in a 30 m square, turning at random, seen by a camera
+    (0.3 m noise, Pd 0.95, 10 Hz) with two false alarms a frame and no stated density."""
+    rng = np.random.default_rng(seed)
+    p = rng.uniform(5.0, 25.0, (8, 2))
+    heading = rng.uniform(0.0, 2 * math.pi, 8)
+    speed = rng.uniform(1.0, 2.0, 8)
+    for k in range(int(duration / T)):
+        turn = rng.random(8) < 0.02
+        heading[turn] += rng.choice([-1.0, 1.0], turn.sum()) * math.pi / 2
+        out = (p < 2.0) | (p > 28.0)
+        heading[out.any(axis=1)] = np.arctan2(*(15.0 - p[out.any(axis=1)]).T[::-1])
+        p = p + T * speed[:, None] * np.column_stack([np.cos(heading), np.sin(heading)])
+        seen = p[rng.random(8) < 0.95]
+        z = np.vstack([seen + rng.normal(0.0, 0.3, seen.shape), rng.uniform(0, 30, (2, 2))])
+        yield Scan("cam", k * T, z, np.tile(np.eye(2) * 0.09, (len(z), 1, 1)), pd=0.95), p
+
+
+@pytest.mark.parametrize("factor", [20.0, 0.0])
+def test_pedestrians_metres_apart_seen_by_a_camera_stay_individual_tracks(factor):
+    """A newcomer's camera scene: with the resolution in force set by the 0.3 m noise (12 m)
+    the walkers keep their tracks; with the radar's 200 m (factor 0, as before) one extended
+    track takes them all."""
+    cfg = TrackerConfig().merged({"extended": {"resolution_noise_factor": factor}})
+    p = TrackingPipeline.all_kinds(cfg)
+    extended = 0
+    for scan, now in _walkers(4):
+        confirmed = p.process(scan).confirmed()
+        extended = max(extended, sum(t.kind == "extended" for t in confirmed))
+        truth = now
+    pos = np.array([t.position for t in confirmed if t.kind == "individual"]).reshape(-1, 2)
+    held = [pos.size and np.hypot(*(pos - x).T).min() < 1.0 for x in truth]
+    if factor:
+        assert extended == 0 and all(held)
+    else:
+        assert extended >= 1 and sum(held) <= 4
