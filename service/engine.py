@@ -47,7 +47,7 @@ from service.ingest import (
 )
 from service.payload import DEFAULT_MAX_BATCH_BYTES, DEFAULT_QUEUE_BYTES, too_large_detail
 from service.reports import ReportOut, ReportSink, ReportState
-from service.schemas import BatchError, DetectionBatchIn, IngestConfig
+from service.schemas import MAX_REORDER_WINDOW, BatchError, DetectionBatchIn, IngestConfig
 from service.state_store import EngineCheckpoint, StateStore, restored_result
 from service.stats import Stats
 from service.viewers import ViewerHub
@@ -737,7 +737,10 @@ class Engine:
     def _run_once(self, q: queue.Queue[Item | _Command | _Stop]) -> bool:
         """Take at most one batch (or command), then release what the reorder window lets go;
         ``False`` when the worker should stop."""
-        timeout = self._held.wait_time(time.monotonic(), self._applied_ingest.reorder_window)
+        ingest = self._applied_ingest
+        timeout = self._held.wait_time(
+            time.monotonic(), ingest.reorder_window or ingest.sensor_wait
+        )
         if self._stopping.is_set():
             timeout = 0.05 if timeout is None else min(timeout, 0.05)
         try:
@@ -761,9 +764,7 @@ class Engine:
                 else:
                     self._safe_handle(item)
             if len(self._held):
-                window = self._applied_ingest.reorder_window
-                for held, batch in self._held.due(time.monotonic(), window):
-                    self._process(held, batch)
+                self._release_held()
         except Exception as exc:
             if isinstance(item, _Command):
                 if not item.future.done():
@@ -772,6 +773,36 @@ class Engine:
                 self._refusals.reject(item, "internal_error", f"{type(exc).__name__}: {exc}", None)
             raise
         return not (self._stopping.is_set() and item is None and q.empty())
+
+    def _release_held(self) -> None:
+        """Process the held batches that may go now, in time order: by the reorder window,
+        or, without one, once no other sensor is due to send an earlier batch (or they
+        waited ``ingest.sensor_wait``)."""
+        ingest, now = self._applied_ingest, time.monotonic()
+        if ingest.reorder_window > 0:
+            due = self._held.due(now, ingest.reorder_window)
+        else:
+            due = self._held.waited(
+                now,
+                ingest.sensor_wait,
+                lambda t, sensor: self._clocks.expected_before(
+                    t, sensor, now, self._held.sensors()
+                ),
+            )
+        for held, batch in due:
+            self._process(held, batch)
+
+    def _waits_for_others(self, batch: DetectionBatchIn) -> bool:
+        """Without a reorder window: whether a valid batch waits (``ingest.sensor_wait``),
+        because batches of its time or earlier wait already, or another sensor is due to
+        send one (see :meth:`SensorClocks.expected_before`)."""
+        if self._applied_ingest.sensor_wait <= 0:
+            return False
+        if batch.time >= self._held.oldest_time:
+            return True
+        return self._clocks.expected_before(
+            batch.time, batch.sensor_id, time.monotonic(), self._held.sensors()
+        )
 
     def _safe_handle(self, item: Item) -> None:
         try:
@@ -825,7 +856,8 @@ class Engine:
         if digest is not None:  # accepted: a copy is a duplicate, unless the tracker refuses it
             item.digest = digest
             self._recent.add(batch.sensor_id, digest)
-        if ingest.reorder_window > 0 and (last is None or batch.time >= last):
+        in_order = last is None or batch.time >= last
+        if in_order and (ingest.reorder_window > 0 or self._waits_for_others(batch)):
             self._held.hold(item, batch)
             if item.on_held is not None:
                 item.on_held()
@@ -863,12 +895,20 @@ class Engine:
         except ScanRejected as exc:
             self._forget(item, batch)
             detail = exc.detail
-            if exc.reason == "out_of_sequence":
-                detail += (
-                    "; batches that reach the service later than others of their time are "
-                    "taken in time order when ingest.reorder_window (now "
-                    f"{self._applied_ingest.reorder_window:g} s) is at least that delay"
-                )
+            last = pipeline.last_time
+            if exc.reason == "out_of_sequence" and last is not None:
+                if last - batch.time > MAX_REORDER_WINDOW:
+                    detail += (
+                        f"; {last - batch.time:.6g} s behind is no network delay: this "
+                        "sensor's clock and that of the sensors before it differ (all sensors "
+                        "must share one time line, such as Unix time in seconds)"
+                    )
+                else:
+                    detail += (
+                        "; batches that reach the service later than others of their time are "
+                        "taken in time order when ingest.reorder_window (now "
+                        f"{self._applied_ingest.reorder_window:g} s) is at least that delay"
+                    )
             self._refusals.reject(item, exc.reason, detail, batch)
             return
         except Exception as exc:  # a tracker bug: report it, keep the worker alive
@@ -880,7 +920,7 @@ class Engine:
             self._note_missing_covariance(batch, pipeline.config.measurement.position_std)
         self._seq += 1
         self._last_wall = time.monotonic()
-        self._clocks.accepted(batch.sensor_id, scan.time)
+        self._clocks.accepted(batch.sensor_id, scan.time, self._last_wall)
         seq = self._seq
         confirmed = [track_to_dict(t) for t in result.confirmed()]
         state = ReportState.of(report_dict(seq, result, ms, confirmed), result)

@@ -40,6 +40,7 @@ from service.payload import (
 )
 from service.reports import ReportOut, error_report_for
 from service.schemas import (
+    MAX_REORDER_WINDOW,
     BatchError,
     DetectionBatchIn,
     IngestConfig,
@@ -155,10 +156,17 @@ def time_jump_detail(
         why = f"{REVISIT_FACTOR:g} times the sensor's usual {revisit:.3g} s between batches"
     if window:
         why += f" plus the {window:g} s reorder window"
+    if batch_time - last > MAX_REORDER_WINDOW + waited:
+        remedy = (
+            "this sensor's clock and that of the sensors before it differ: all sensors must "
+            "share one time line, such as Unix time in seconds; the service keeps the time "
+            "line of the batches it processed"
+        )
+    else:
+        remedy = "if this sensor's clock is right, raise ingest.max_time_jump: PATCH /api/v1/config"
     return (
         f"time {batch_time} is {batch_time - last:.6g} s after the last processed time {last}: "
-        f"more than {why} plus the {waited:.3g} s of wall time since (if this sensor's clock "
-        "is right, raise ingest.max_time_jump: PATCH /api/v1/config)"
+        f"more than {why} plus the {waited:.3g} s of wall time since ({remedy})"
     )
 
 
@@ -184,6 +192,9 @@ def _recently_seen(
     return entry
 
 
+_monotonic = time.monotonic
+
+
 class SensorClocks:
     """Each sensor's usual interval between batches: the median of the gaps between the times
     of its last ``gaps + 1`` accepted batches, for the last ``sensors`` sensors seen (least
@@ -193,10 +204,35 @@ class SensorClocks:
         self.gaps = gaps
         self.sensors = sensors
         self._times: OrderedDict[str, deque[float]] = OrderedDict()
+        self._wall: dict[str, float] = {}
 
-    def accepted(self, sensor_id: str, time: float) -> None:
+    def accepted(self, sensor_id: str, time: float, wall: float | None = None) -> None:
         make = functools.partial(deque, maxlen=self.gaps + 1)
         _recently_seen(self._times, sensor_id, make, self.sensors).append(time)
+        if len(self._wall) > 2 * self.sensors:  # forget those forgotten above
+            self._wall = {k: v for k, v in self._wall.items() if k in self._times}
+        self._wall[sensor_id] = _monotonic() if wall is None else wall
+
+    def expected_before(
+        self, time: float, sensor_id: str, now: float, busy: set[str], recent: float = 10.0
+    ) -> bool:
+        """Whether another sensor, not in ``busy`` (those with a batch waiting already) and
+        heard from within ``recent`` seconds of wall time, is due to send a batch of ``time``
+        or earlier: its last time plus its usual interval is at most ``time``, and it is not
+        late by a whole interval more (then it missed a beat, and nothing waits for it)."""
+        eps = 1e-9 * max(1.0, abs(time))
+        for other in reversed(self._times):  # most recently seen first
+            if now - self._wall.get(other, -math.inf) > recent:
+                break
+            if other == sensor_id or other in busy:
+                continue
+            interval = self.revisit(other)
+            if interval <= 0.0:
+                continue
+            last = self._times[other][-1]
+            if last + interval <= time + eps and time < last + 2.0 * interval:
+                return True
+        return False
 
     def revisit(self, sensor_id: str) -> float:
         """The sensor's usual interval between batches (s), 0 before its second batch."""
@@ -230,6 +266,36 @@ class ReorderBuffer:
             return None
         oldest_arrival = min(entry[2].arrived for entry in self._heap)
         return max(0.0, oldest_arrival + window - now)
+
+    def sensors(self) -> set[str]:
+        """The sensors with a batch held."""
+        return {entry[3].sensor_id for entry in self._heap}
+
+    @property
+    def oldest_time(self) -> float:
+        """The earliest time held (``inf`` when empty)."""
+        return self._heap[0][0] if self._heap else math.inf
+
+    def waited(
+        self, now: float, wait: float, expected: Callable[[float, str], bool]
+    ) -> Iterator[tuple[Item, DetectionBatchIn]]:
+        """With no reorder window: the batches that may go now, in time order. A batch goes
+        once no other sensor is ``expected`` to send one of its time or earlier, or once one
+        held batch of its time or later has waited ``wait`` seconds of wall time."""
+        heap = self._heap
+        while heap:
+            t, _, item, batch = heap[0]
+            if wait <= 0 or not expected(t, batch.sensor_id):
+                heapq.heappop(heap)
+                yield item, batch
+                continue
+            expired = [e for e in heap if now - e[2].arrived >= wait]
+            if not expired:
+                return
+            cutoff = max(e[0] for e in expired)
+            while heap and heap[0][0] <= cutoff:
+                _, _, held, held_batch = heapq.heappop(heap)
+                yield held, held_batch
 
     def due(self, now: float, window: float) -> Iterator[tuple[Item, DetectionBatchIn]]:
         """The batches that may go now, in time order (all of them when ``window`` <= 0)."""

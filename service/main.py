@@ -405,6 +405,7 @@ def create_app(settings: Settings | None = None, token_source: str | None = None
     ingest_defaults = IngestConfig(
         max_detections_per_batch=settings.max_detections_per_batch,
         reorder_window=settings.reorder_window,
+        sensor_wait=settings.sensor_wait,
         max_time_jump=settings.max_time_jump,
     )
     loaded = None

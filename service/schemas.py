@@ -256,6 +256,17 @@ _MESSAGES = {
 }
 
 
+#: What a batch's refused ``time`` most likely is (a newcomer sent milliseconds, and a date).
+_UNIT_HINT = " (seconds: a time in milliseconds, microseconds or nanoseconds is too large)"
+_DATE_HINT = " (seconds on the sensors' shared time line, such as Unix time; not a date)"
+_TIME_HINTS = {
+    "less_than_equal": _UNIT_HINT,
+    "greater_than_equal": _UNIT_HINT,
+    "float_type": _DATE_HINT,
+    "float_parsing": _DATE_HINT,
+}
+
+
 def _location(loc: tuple[int | str, ...]) -> str:
     out = ""
     for part in loc:
@@ -297,6 +308,8 @@ def format_validation_error(exc: ValidationError, errors: list[Any] | None = Non
                 msg = err["msg"]
         # A cov's SPD check reports at the cov itself; a tuple's shape errors one level down.
         place = _location(tuple(loc))
+        if place == "time":
+            msg += _TIME_HINTS.get(kind, "")
         parts.append(f"{place}: {msg}" if place else msg)
     if len(errors) > 3:
         parts.append(f"and {len(errors) - 3} more")
@@ -727,6 +740,15 @@ class IngestConfig(BaseModel):
     max_detections_per_batch: Annotated[int, Strict(), Field(ge=1)] = 10000
     reorder_window: Annotated[Finite, Field(ge=0.0, le=MAX_REORDER_WINDOW)] = Field(
         default=0.0, description="seconds a batch may be held back to put late ones in time order"
+    )
+    sensor_wait: Annotated[Finite, Field(ge=0.0, le=60.0)] = Field(
+        default=0.2,
+        description=(
+            "seconds a batch may wait, when there is no reorder window, for another sensor "
+            "due to send one of its time or earlier (its last time plus its usual interval): "
+            "two sensors on one tick, delayed differently on the network, are then taken in "
+            "time order instead of refusing the later-stamped one's slower rival; 0: none"
+        ),
     )
     max_time_jump: Annotated[Finite, Field(gt=0.0, le=MAX_REORDER_WINDOW)] = Field(
         default=10.0,

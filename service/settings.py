@@ -291,6 +291,12 @@ class Settings(BaseSettings):
         le=MAX_REORDER_WINDOW,
         description="default of the config's ingest.reorder_window, s",
     )
+    sensor_wait: float = Field(
+        default=_INGEST["sensor_wait"].default,
+        ge=0,
+        le=60,
+        description="default of the config's ingest.sensor_wait, s",
+    )
     max_time_jump: float = Field(
         default=_INGEST["max_time_jump"].default,
         gt=0,

@@ -255,6 +255,7 @@ def test_rest_config(service: RunningService, peer: zenoh.Session) -> None:
             assert doc["ingest"] == {
                 "max_detections_per_batch": 10000,
                 "reorder_window": 0.0,
+                "sensor_wait": 0.2,
                 "max_time_jump": 10.0,
             }
             assert "track_management" in doc and "measurement" in doc
