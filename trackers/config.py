@@ -306,7 +306,9 @@ class TrackManagementConfig:
     ``ln((1 − β)/α)`` and the deletion threshold ``ln(β/(1 − α))`` with α =
     ``p_false_confirm`` and β = ``p_true_delete``. A confirmed track is also deleted when its
     score falls ``delete_drop_from_peak`` below its peak, or when it has had no detection for
-    ``max_coast_time`` seconds; time spent inside an extended track's resolution cell counts
+    ``max_coast_time`` seconds, or 2.5 revisits of its sensor if that is longer (a GMTI every
+    10 s misses a vehicle twice in a row now and then); time spent inside an extended track's
+    resolution cell counts
     at the rate ``extended.in_cell_pd / pd`` there (the object hides it: a vehicle beside a
     convoy coasts that much longer).
     """
@@ -326,8 +328,9 @@ class TrackManagementConfig:
     )
     max_coast_time: float = _field(
         10.0,
-        "a confirmed track is deleted after this long without a detection, s (inside an "
-        "extended track's resolution cell the time counts at the rate extended.in_cell_pd / pd)",
+        "a confirmed track is deleted after this long without a detection, s (or 2.5 revisits "
+        "of its sensor, if longer; inside an extended track's resolution cell the time counts "
+        "at the rate extended.in_cell_pd / pd)",
         gt=0,
         le=1e6,
     )

@@ -72,6 +72,13 @@ KIND = "individual"
 #: whatever its score (tracks handed in by peers keep their status).
 MIN_CONFIRM_HITS = 3
 
+#: A track may coast for at least this many revisits of its sensor, however short
+#: ``max_coast_time``: a GMTI revisiting every 10 s misses a vehicle twice in a row now and then
+#: (1 % a scan at P_D 0.9), and ``max_coast_time`` 10 s deleted it at the second miss.
+COAST_REVISITS = 2.5
+#: ... once it is confirmed and has had this many detections.
+COAST_MIN_HITS = 5
+
 
 @dataclass(frozen=True, eq=False)
 class TrackArrays(RowArrays):
@@ -360,10 +367,12 @@ class IndividualTracker:
 
         # A track whose detection probability a peer lowered (a vehicle inside a convoy's
         # resolution cell) is expected to go undetected for longer: its coasting time counts
-        # at the rate P_D / P_D,sensor while it is there.
-        coast = t - tracks.updated
+        # at the rate P_D / P_D,sensor while it is there. A track of a slow sensor may coast
+        # through two of its missed revisits (:func:`_coast_rate`). The lower rate counts.
+        rate = _coast_rate(tracks, tm.max_coast_time, pd_sensor)
         if masked.size and (masked < 1.0).any():
-            coast[: masked.size] *= masked
+            rate[: masked.size] = np.minimum(rate[: masked.size], masked)
+        coast = (t - tracks.updated) * rate
         status = sequential_test(tracks.score, tracks.peak, tracks.confirmed, coast, tm)
         delete = status.delete
         delete[n_old:] = False  # a track is never deleted in the scan that starts or adopts it
@@ -1116,6 +1125,23 @@ def _group_velocities(z: np.ndarray, tracks: TrackArrays, init: InitiationConfig
     nearest = order[rank == 0]
     out[j[nearest]] = np.take(v, np.take(rows, k[nearest]), axis=0)
     return out
+
+
+def _coast_rate(tracks: TrackArrays, max_coast: float, pd: float) -> np.ndarray:
+    """The rate at which each track's coasting time counts against ``max_coast``:
+
+        min(1, T_coast / (COAST_REVISITS · T̂)),   T̂ = P_D (t_updated − t_created) / (hits − 1),
+
+    ``T̂`` its sensor's revisit as the track saw it (its mean interval between detections,
+    of which a fraction ``P_D`` are detected), for confirmed tracks of at least
+    :data:`COAST_MIN_HITS` detections (a false track's few hits say little of a revisit); 1
+    for the others. It is below 1 only where the revisit is long (over 4 s with the
+    defaults), and then lets a track coast through two missed revisits."""
+    hits = tracks.hits
+    revisit = pd * (tracks.updated - tracks.created) / np.maximum(hits - 1, 1)
+    known = tracks.confirmed & (hits >= COAST_MIN_HITS)
+    reach = np.where(known, COAST_REVISITS * revisit, 0.0)
+    return np.minimum(1.0, max_coast / np.maximum(reach, max_coast))
 
 
 def _missed_branch(time: np.ndarray, score: np.ndarray, t: float, miss: float) -> np.ndarray:

@@ -119,6 +119,28 @@ def test_max_coast_time_deletes():
     assert k == 13
 
 
+@pytest.mark.parametrize("revisit", [10.0, 1.0])
+def test_a_slow_sensors_track_coasts_through_two_missed_revisits(revisit):
+    """A GMTI every 10 s misses a vehicle twice in a row now and then; max_coast_time 10 s
+    deleted its track at the second miss (a newcomer's 40 vehicles: 10-13 deletions a run).
+    It now coasts for 2.5 revisits (the sensor's, as the track saw it); a fast sensor's
+    track still coasts for max_coast_time only."""
+    tr = IndividualTracker(TrackerConfig())
+    truth = lambda k: np.array([1000.0 + 10.0 * revisit * k, 500.0])  # noqa: E731
+    rng = np.random.default_rng(2)
+    for k in range(8):
+        res = tr.step(scan_at(k * revisit, truth(k) + rng.normal(0.0, SIGMA, 2), pd=0.9))
+    (tid,) = [t.id for t in res.confirmed()]
+    deleted = []
+    for k in range(8, 8 + int(30 / revisit)):  # no detection for 30 s
+        deleted += tr.step(scan_at(k * revisit, np.zeros((0, 2)), pd=0.9)).deleted
+        if revisit == 10.0 and k == 9:  # two revisits missed
+            assert not deleted
+    assert deleted == [tid]
+    if revisit == 1.0:  # deleted when 10 s without detection were over, as before
+        assert k * revisit - 7 * revisit > 10.0
+
+
 def test_track_ids_are_unique_and_never_reused():
     tr = IndividualTracker(config(pd=0.9, clutter_density=1e-6))
     seen = []

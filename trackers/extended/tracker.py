@@ -335,6 +335,7 @@ class _PointGates:
         self.xy, self.v = x[:, :2], x[:, 2:4]
         self.Pp, self.Pv = P[:, :2, :2], P[:, 2:4, 2:4]
         self.created = np.take(view.created, self.rows)
+        self._ids = view.ids
         self.size = scan.size
         self._z, self._R = scan.z, scan.R
         self._x, self._P = x, P
@@ -381,13 +382,15 @@ class _PointGates:
         reach: float,
         ve: tuple[float, float],
         spread: float,
+        own: tuple[float, frozenset[str]] = (math.inf, frozenset()),
     ) -> set[int]:
         """What the confirmed tracks not moving with an extended track would take of its
         detections ``rows`` (ascending, all within ``reach`` of ``centre``; ``points`` as
         :func:`_points` gives them): for each track whose velocity is more than ``spread``
         (m/s) from ``ve`` (:func:`_moves_with` with no allowance for uncertainty), the
         detection nearest to it in its gate (Mahalanobis; of equally near ones the first), if
-        any. Only the tracks whose gate can
+        any; but for the extended track's own (``own``: its origin and its visitors; tracks
+        created since the origin that are no visitor). Only the tracks whose gate can
         reach that far are looked at (``d² ≤ χ² λ_max(Pp + R) ≤ χ² (tr Pp + tr R)``), on
         floats, operation for operation as the array formulas."""
         if not (rows and self.rows.size):
@@ -399,6 +402,14 @@ class _PointGates:
         ks = np.flatnonzero(dx * dx + dy * dy <= r * r)
         if ks.size == 0:
             return set()
+        origin, visitors = own
+        mine = np.take(self.created, ks) >= origin
+        if mine.any():
+            ids = self._ids
+            mine[mine] = [ids[int(self.rows[k])] not in visitors for k in ks[mine].tolist()]
+            ks = ks[~mine]
+            if ks.size == 0:
+                return set()
         x = np.take(self._x, ks, axis=0)[:, :4].tolist()
         P = np.take(self._P, ks, axis=0)[:, :4, :4].reshape(-1, 16).tolist()
         gate = np.take(gate, ks).tolist()
@@ -572,7 +583,7 @@ class ExtendedTracker(SavesImmutableState):
             inside: dict[int, float] | None = None
             if tree is not None:
                 subsets, points, inside = _gated_subsets(
-                    est, scan, tree, R_mean, claimed, point_gates, cfg
+                    est, scan, tree, R_mean, claimed, point_gates, cfg, track
                 )
             gain, chosen, parts, left_out, fitted = _likeliest(
                 track, est, scan, subsets, points, cfg, log_lam, inside
@@ -847,16 +858,20 @@ def _gated_subsets(
     claimed: np.ndarray,
     point_gates: Callable[[], _PointGates],
     cfg: ExtendedConfig,
+    track: ExtendedTrack | None = None,
 ) -> tuple[list[list[int]], dict[int, tuple[float, ...]], dict[int, float] | None]:
     """The detections a track predicted to ``est`` may take, as resolution subsets (rows of
     the scan, in the k-d tree's order): of the unclaimed detections near it, less the one
     nearest to each confirmed individual track not moving with it (velocities more than
-    ``group_speed_spread`` apart), the subsets with a detection in its gate
-    ``mⱼ = (yⱼ − H x)ᵀ (H P Hᵀ + z X + Rⱼ)⁻¹ (yⱼ − H x) ≤ gate_threshold``, whole (a bending
-    column). Near: within 1.5 times the radius of the gate with the scan's mean ``R̄`` plus a
-    resolution distance. Also returns the near detections as :func:`_points` gives them, and
-    ``mⱼ`` of each detection of the subsets that lies in the gate when the gate's radius (with
-    ``R̄``) is less than the resolution distance (else None)."""
+    ``group_speed_spread`` apart) and not started by its own detections (created since
+    ``track``'s cluster was first seen, never seen coming from outside: those of a ship's
+    returns that jump about its hull would starve a new track of them), the subsets with a
+    detection in its gate ``mⱼ = (yⱼ − H x)ᵀ (H P Hᵀ + z X + Rⱼ)⁻¹ (yⱼ − H x) ≤ gate_threshold``,
+    whole (a bending column). Near: within 1.5 times the radius of the gate with the scan's
+    mean ``R̄`` plus a resolution distance. Also returns the near detections as
+    :func:`_points` gives them, and ``mⱼ`` of each detection of the subsets that lies in the
+    gate when the gate's radius (with ``R̄``) is less than the resolution distance (else
+    None)."""
     ga, gb, gc = innovation_entries(est, 1, R_mean, cfg.z_scale)  # H P Hᵀ + z X + R̄
     radius = math.sqrt(cfg.gate_threshold * (0.5 * (ga + gc) + _hypot(0.5 * (ga - gc), gb)))
     c0, c1, v0, v1 = est.x.tolist()
@@ -868,7 +883,13 @@ def _gated_subsets(
     points = _points(scan, near)
     rows = near.tolist()
     theirs = point_gates().theirs(
-        sorted(rows), points, (c0, c1), reach, (v0, v1), cfg.group_speed_spread
+        sorted(rows),
+        points,
+        (c0, c1),
+        reach,
+        (v0, v1),
+        cfg.group_speed_spread,
+        (math.inf, frozenset()) if track is None else (track.origin, track.visitors),
     )
     if theirs:
         rows = [r for r in rows if r not in theirs]

@@ -350,3 +350,30 @@ def test_pedestrians_metres_apart_seen_by_a_camera_stay_individual_tracks(factor
         assert extended == 0 and all(held)
     else:
         assert extended >= 1 and sum(held) <= 4
+
+
+def test_a_ships_own_point_tracks_do_not_starve_its_new_extended_track():
+    """A newcomer's ship (150 m x 20 m, 5-11 returns a scan, 10 m noise, T = 1 s): its returns
+    confirm point tracks before its extended track starts at 10 s, and those kept the returns
+    in their gates from the new track, which was dropped at the next scan with 5 returns
+    (seed 16: started again at 22 s, point tracks on the ship until about 60 s). A track its
+    own returns started holds nothing back from it."""
+    rng = np.random.default_rng(16)
+    p = TrackingPipeline.all_kinds()
+    first = None
+    for k in range(40):
+        n = int(rng.integers(5, 12))
+        z = np.array(
+            [
+                (rng.uniform(-75, 75), rng.uniform(-10, 10), rng.normal(0, 10), rng.normal(0, 10))
+                for _ in range(n)
+            ]
+        )
+        z = np.array([3000.0 + 5.0 * k, -2000.0]) + z[:, :2] + z[:, 2:]
+        confirmed = p.process(Scan("r3", float(k), z, np.tile(np.eye(2) * 100.0, (n, 1, 1))))
+        kinds = [t.kind for t in confirmed.confirmed()]
+        if first is None and "extended" in kinds:
+            first = k
+        if k >= 14:
+            assert kinds == ["extended"], (k, kinds)
+    assert first is not None and first <= 12
