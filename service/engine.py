@@ -796,10 +796,10 @@ class Engine:
         """Without a reorder window: whether a valid batch waits (``ingest.sensor_wait``),
         because batches of its time or earlier wait already, or another sensor is due to
         send one (see :meth:`SensorClocks.expected_before`)."""
+        if batch.time >= self._held.oldest_time:
+            return True  # behind batches held already (perhaps by an earlier setting)
         if self._applied_ingest.sensor_wait <= 0:
             return False
-        if batch.time >= self._held.oldest_time:
-            return True
         return self._clocks.expected_before(
             batch.time, batch.sensor_id, time.monotonic(), self._held.sensors()
         )

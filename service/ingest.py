@@ -12,7 +12,7 @@ from a payload that failed validation (:func:`peek`, which reads at most a bound
 
 from __future__ import annotations
 
-import functools
+import bisect
 import hashlib
 import heapq
 import itertools
@@ -195,52 +195,93 @@ def _recently_seen(
 _monotonic = time.monotonic
 
 
+#: A sensor is due for a time up to this fraction of its interval before its expected time:
+#: two sensors on one tick stamp their batches some microseconds to milliseconds apart.
+DUE_JITTER = 0.05
+
+
 class SensorClocks:
     """Each sensor's usual interval between batches: the median of the gaps between the times
     of its last ``gaps + 1`` accepted batches, for the last ``sensors`` sensors seen (least
-    recently seen forgotten first). Used by one thread (the worker)."""
+    recently seen forgotten first); and when each is due next (its last time plus that
+    interval), kept sorted. Used by one thread (the worker)."""
 
     def __init__(self, gaps: int = 8, sensors: int = 1024) -> None:
         self.gaps = gaps
         self.sensors = sensors
         self._times: OrderedDict[str, deque[float]] = OrderedDict()
+        self._interval: dict[str, float] = {}
         self._wall: dict[str, float] = {}
+        self._due: list[tuple[float, str]] = []  # (next due time, sensor), ascending
+        self._due_of: dict[str, float] = {}
+        self._latest = -math.inf  # the latest time accepted
+        self._longest = 0.0  # no interval has been longer
 
     def accepted(self, sensor_id: str, time: float, wall: float | None = None) -> None:
-        make = functools.partial(deque, maxlen=self.gaps + 1)
-        _recently_seen(self._times, sensor_id, make, self.sensors).append(time)
-        if len(self._wall) > 2 * self.sensors:  # forget those forgotten above
-            self._wall = {k: v for k, v in self._wall.items() if k in self._times}
+        times = self._times.get(sensor_id)
+        if times is None:
+            times = self._times[sensor_id] = deque(maxlen=self.gaps + 1)
+            if len(self._times) > self.sensors:
+                gone, _ = self._times.popitem(last=False)
+                self._interval.pop(gone, None)
+                self._wall.pop(gone, None)
+                self._undue(gone)
+        else:
+            self._times.move_to_end(sensor_id)
+        times.append(time)
+        gaps = sorted(b - a for a, b in pairwise(times) if b > a)
+        interval = gaps[len(gaps) // 2] if gaps else 0.0
+        self._interval[sensor_id] = interval
+        self._longest = max(self._longest, interval)
         self._wall[sensor_id] = _monotonic() if wall is None else wall
+        self._latest = max(self._latest, time)
+        self._undue(sensor_id)
+        if interval > 0.0:
+            due = time + interval
+            bisect.insort(self._due, (due, sensor_id))
+            self._due_of[sensor_id] = due
+
+    def _undue(self, sensor_id: str) -> None:
+        due = self._due_of.pop(sensor_id, None)
+        if due is not None:
+            k = bisect.bisect_left(self._due, (due, sensor_id))
+            del self._due[k]
 
     def expected_before(
         self, time: float, sensor_id: str, now: float, busy: set[str], recent: float = 10.0
     ) -> bool:
         """Whether another sensor, not in ``busy`` (those with a batch waiting already) and
         heard from within ``recent`` seconds of wall time, is due to send a batch of ``time``
-        or earlier: its last time plus its usual interval is at most ``time``, and it is not
-        late by a whole interval more (then it missed a beat, and nothing waits for it)."""
-        eps = 1e-9 * max(1.0, abs(time))
-        for other in reversed(self._times):  # most recently seen first
-            if now - self._wall.get(other, -math.inf) > recent:
+        or earlier: its last time plus its usual interval is at most ``time`` (plus
+        :data:`DUE_JITTER` of that interval), and it is not late by a whole interval more
+        (then it missed a beat, and nothing waits for it). Looks only at the sensors due by
+        then, in due order; those late for every time still to come are dropped."""
+        stale: list[tuple[float, str]] = []
+        found = False
+        for due, other in self._due:
+            interval = self._interval[other]
+            if due + interval <= self._latest:
+                stale.append((due, other))  # late for every batch not out of sequence
+                continue
+            if due > time + DUE_JITTER * interval:
+                if due > time + DUE_JITTER * self._longest:
+                    break  # so is every sensor after it
+                continue
+            if (
+                other != sensor_id
+                and other not in busy
+                and time < due + interval
+                and now - self._wall[other] <= recent
+            ):
+                found = True
                 break
-            if other == sensor_id or other in busy:
-                continue
-            interval = self.revisit(other)
-            if interval <= 0.0:
-                continue
-            last = self._times[other][-1]
-            if last + interval <= time + eps and time < last + 2.0 * interval:
-                return True
-        return False
+        for _, other in stale:
+            self._undue(other)
+        return found
 
     def revisit(self, sensor_id: str) -> float:
         """The sensor's usual interval between batches (s), 0 before its second batch."""
-        times = self._times.get(sensor_id)
-        if times is None or len(times) < 2:
-            return 0.0
-        gaps = sorted(b - a for a, b in pairwise(times) if b > a)
-        return gaps[len(gaps) // 2] if gaps else 0.0
+        return self._interval.get(sensor_id, 0.0)
 
 
 class ReorderBuffer:

@@ -257,7 +257,7 @@ _MESSAGES = {
 
 
 #: What a batch's refused ``time`` most likely is (a newcomer sent milliseconds, and a date).
-_UNIT_HINT = " (seconds: a time in milliseconds, microseconds or nanoseconds is too large)"
+_UNIT_HINT = " (seconds: a time in milliseconds, microseconds or nanoseconds is out of range)"
 _DATE_HINT = " (seconds on the sensors' shared time line, such as Unix time; not a date)"
 _TIME_HINTS = {
     "less_than_equal": _UNIT_HINT,

@@ -306,8 +306,9 @@ class TrackManagementConfig:
     ``ln((1 − β)/α)`` and the deletion threshold ``ln(β/(1 − α))`` with α =
     ``p_false_confirm`` and β = ``p_true_delete``. A confirmed track is also deleted when its
     score falls ``delete_drop_from_peak`` below its peak, or when it has had no detection for
-    ``max_coast_time`` seconds, or 2.5 revisits of its sensor if that is longer (a GMTI every
-    10 s misses a vehicle twice in a row now and then); time spent inside an extended track's
+    ``max_coast_time`` seconds, or, once confirmed with 5 detections, 2.5 revisits of its
+    sensor if that is longer (a GMTI every 10 s misses a vehicle twice in a row now and
+    then); time spent inside an extended track's
     resolution cell counts
     at the rate ``extended.in_cell_pd / pd`` there (the object hides it: a vehicle beside a
     convoy coasts that much longer).
@@ -328,9 +329,9 @@ class TrackManagementConfig:
     )
     max_coast_time: float = _field(
         10.0,
-        "a confirmed track is deleted after this long without a detection, s (or 2.5 revisits "
-        "of its sensor, if longer; inside an extended track's resolution cell the time counts "
-        "at the rate extended.in_cell_pd / pd)",
+        "a confirmed track is deleted after this long without a detection, s (or, once it has "
+        "5 detections, 2.5 revisits of its sensor, if longer; inside an extended track's "
+        "resolution cell the time counts at the rate extended.in_cell_pd / pd)",
         gt=0,
         le=1e6,
     )
@@ -394,9 +395,10 @@ class ExtendedConfig:
     3 scans, and those its own detections started (in its cell, created since its cluster was
     first seen, never seen coming from outside), are absorbed. A track is deleted like an
     individual one (the sequential test of ``track_management``) or after ``max_coast_time``
-    without detections. For each batch the resolution distance in force is at most
-    ``resolution_noise_factor`` standard deviations of its detections' position noise, and
-    ``group_speed_spread`` shrinks by the same ratio (a camera's pedestrians are no group).
+    without detections. The resolution distance in force is at most
+    ``resolution_noise_factor`` standard deviations of the position noise of the coarsest
+    sensor heard in the last 60 s, and ``group_speed_spread`` shrinks by the same ratio (a
+    camera's pedestrians are no group).
     """
 
     enabled: bool = _field(True, "track extended objects and groups alongside individual targets")
@@ -410,9 +412,10 @@ class ExtendedConfig:
     )
     resolution_noise_factor: float = _field(
         40.0,
-        "the resolution distance in force for a batch is at most this many standard deviations"
-        " of its detections' position noise (their median), so that a fine sensor (a camera's"
-        " 0.3 m) resolves targets metres apart; 0: resolution_distance always",
+        "the resolution distance in force is at most this many standard deviations of the"
+        " position noise of the coarsest sensor heard in the last 60 s (a batch's median), so"
+        " that a fine sensor (a camera's 0.3 m) resolves targets metres apart; 0:"
+        " resolution_distance always",
         ge=0,
         le=1e6,
     )

@@ -950,9 +950,10 @@ def _handed_in(
 
     A handed track that a local one already follows (Mahalanobis distance over position and
     velocity, ``d² = Δᵀ (P_h + P_l)⁻¹ Δ < HAND_IN_GATE``) is not added: the nearest such
-    local track takes its id, its first time and the higher score and is confirmed. A state
-    whose id is live here already is ignored. Returns the new prediction and the confirmed
-    local ids that were renamed (gone from the reports under their old ids)."""
+    local track takes its id, its first time, its hits (added) and the higher score and is
+    confirmed. A state whose id is live here already is ignored. Returns the new prediction
+    and the confirmed local ids that were renamed (gone from the reports under their old
+    ids)."""
     t, config, models = pred.time, pred.config, pred.models
     live = set(pred.tracks.ids.tolist())
     fresh = [st for st in states if st.id not in live]
@@ -974,7 +975,7 @@ def _handed_in(
 
     tracks = pred.tracks
     ids = tracks.ids.copy()
-    created, score = tracks.created.copy(), tracks.score.copy()
+    created, score, hits = tracks.created.copy(), tracks.score.copy(), tracks.hits.copy()
     peak, confirmed = tracks.peak.copy(), tracks.confirmed.copy()
     renamed: list[str] = []
     add = np.ones(n, dtype=bool)
@@ -993,12 +994,15 @@ def _handed_in(
             renamed.append(str(ids[k]))
         ids[k] = st.id
         created[k] = min(created[k], st.created)
+        hits[k] += st.hits  # both instances' detections, over the time since created
         score[k] = max(score[k], st.score)
         peak[k] = max(peak[k], score[k])
         confirmed[k] = True
         free[k] = False
         add[i] = False
-    tracks = replace(tracks, ids=ids, created=created, score=score, peak=peak, confirmed=confirmed)
+    tracks = replace(
+        tracks, ids=ids, created=created, hits=hits, score=score, peak=peak, confirmed=confirmed
+    )
     keep = np.flatnonzero(add)
     born = born.take(keep)
     merged = replace(

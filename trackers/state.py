@@ -292,6 +292,10 @@ class SectionReader:
         starts, ends = _bounds(counts)
         return [tuple(flat[a:b]) for a, b in zip(starts, ends, strict=True)]
 
+    def length(self, name: str) -> int:
+        """The length of the 1-D array ``name`` not read yet (−1: none such)."""
+        return self._size(name)
+
     def _size(self, name: str) -> int:
         a = self.arrays.get(name)
         return -1 if a is None or a.ndim != 1 else int(a.shape[0])

@@ -282,7 +282,7 @@ def test_a_time_far_ahead_is_refused_and_blocks_nothing(
     assert nanos.error is not None and nanos.error["error"] == "invalid_batch"
     assert nanos.error["detail"] == (
         "time: must be <= 1e+12 (seconds: a time in milliseconds, microseconds or "
-        "nanoseconds is too large)"
+        "nanoseconds is out of range)"
     )
     date = batch_payload(scans[3]).replace(
         orjson.dumps({"time": scans[3].time})[1:-1], b'"time":"2026-11-26T01:00:00Z"', 1
@@ -540,9 +540,20 @@ def test_sensor_clocks_say_which_sensor_is_due_before_a_time() -> None:
     assert clocks.expected_before(1.5, "b", 100.2, set())
     assert not clocks.expected_before(1.2, "b", 100.2, set())
     assert not clocks.expected_before(1.5, "b", 100.2, {"a"})  # a's batch is held already
-    assert not clocks.expected_before(1.5, "a", 100.2, set())  # b's is due at 1.51
+    assert clocks.expected_before(1.5, "a", 100.2, set())  # b's at 1.51: within 5 % of a tick
+    for t in (0.1, 0.6, 1.1):
+        clocks.accepted("c", t, wall=100.0)
+    assert not clocks.expected_before(1.5, "a", 100.2, {"b"})  # c's is due at 1.6
     assert not clocks.expected_before(2.1, "b", 100.2, set())  # a is late a whole interval
     assert not clocks.expected_before(1.5, "b", 111.0, set())  # a not heard from for 11 s
+    # on Unix time, a batch a quarter tick before a's next one does not wait (a tolerance
+    # that grew with the clock's value made every batch wait)
+    unix = SensorClocks()
+    for t in (1.8e9, 1.8e9 + 0.5, 1.8e9 + 1.0):
+        unix.accepted("a", t, wall=100.0)
+    assert not unix.expected_before(1.8e9 + 1.375, "b", 100.2, set())
+    assert unix.expected_before(1.8e9 + 1.49, "b", 100.2, set())  # within 5 % of a tick
+    assert unix.expected_before(1.8e9 + 1.5, "b", 100.2, set())
 
 
 def _on_one_tick(k: int, sensor: str, skew: float) -> bytes:
@@ -595,5 +606,23 @@ def test_a_lone_sensor_never_waits_and_a_silent_one_is_not_waited_for(sink: List
         for k in (5, 6):
             eng.submit(_on_one_tick(k, "b", 0.0), None, "t").result(timeout=5)
         assert time.monotonic() - t0 < 0.3
+    finally:
+        eng.stop()
+
+
+def test_batches_held_under_an_earlier_setting_stay_in_time_order(sink: ListSink) -> None:
+    """Held under a reorder window that is then set to 0 (and sensor_wait too), a later
+    batch must not overtake them: they were acknowledged and would be refused."""
+    eng = Engine(sink=sink, ingest=IngestConfig(reorder_window=30.0))
+    eng.start()
+    try:
+        held = [eng.submit(_on_one_tick(k, "a", 0.0), None, "t") for k in range(2)]
+        time.sleep(0.2)
+        assert not any(f.done() for f in held)
+        eng.patch_config({"ingest": {"reorder_window": 0.0, "sensor_wait": 0.0}})
+        later = eng.submit(_on_one_tick(2, "a", 0.0), None, "t").result(timeout=5)
+        results = [f.result(timeout=5) for f in held] + [later]
+        assert all(r.accepted for r in results), [r.error for r in results]
+        assert [r["time"] for r in sink.tracks] == [1.8e9, 1.8e9 + 0.5, 1.8e9 + 1.0]
     finally:
         eng.stop()

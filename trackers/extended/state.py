@@ -71,6 +71,9 @@ class ExtendedCheckpoint:
         arrays["candidates.seen"] = np.array([c.seen for c in cands], dtype=np.int64)
         arrays["candidates.sums"] = np.array([c.sums for c in cands], dtype=float).reshape(k, 7)
         put_strings(arrays, "absorbing.ids", [tid for tid, _ in st.absorbing])
+        put_strings(arrays, "noise.sensors", [e[0] for e in st.noise])
+        arrays["noise.sigma"] = np.array([e[1] for e in st.noise], dtype=float)
+        arrays["noise.time"] = np.array([e[2] for e in st.noise], dtype=float)
         arrays["absorbing.scans"] = np.array([s for _, s in st.absorbing], dtype=np.int64)
         values = {
             "time": st.time,
@@ -131,6 +134,15 @@ def read_state(section: StateSection, base: _State, id_prefix: str = "") -> _Sta
     c_sums = r.floats("candidates.sums", (k, 7))
     absorbing_ids = [s or "" for s in r.strings("absorbing.ids", a)]
     absorbing_scans = r.integers("absorbing.scans", (a,), ge=0)
+    noise: tuple[tuple[str, float, float], ...] = ()
+    if r.has("noise.sigma"):  # files written before it was kept have none
+        s = r.floats("noise.sigma", (r.length("noise.sigma"),))
+        if (s <= 0).any():
+            raise StateError("peer/extended: noise.sigma: must be positive")
+        n_s = int(s.shape[0])
+        sensors = [x or "" for x in r.strings("noise.sensors", n_s)]
+        times = r.floats("noise.time", (n_s,))
+        noise = tuple(zip(sensors, s.tolist(), times.tolist(), strict=True))
     r.finish()
 
     def bad(detail: str) -> StateError:
@@ -203,4 +215,5 @@ def read_state(section: StateSection, base: _State, id_prefix: str = "") -> _Sta
         next_id=next_id,
         time=t,
         absorbing=absorbing,
+        noise=noise,
     )

@@ -39,6 +39,7 @@ velocity and extent prior; such a track is confirmed at once.
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, replace
@@ -77,6 +78,8 @@ __all__ = [
     "ExtendedTrack",
     "ExtendedTracker",
     "extent_ellipse",
+    "position_noise",
+    "remembered_noise",
     "resolution_in_force",
     "snapshot_of",
 ]
@@ -99,26 +102,61 @@ BIRTH_VELOCITY_STD = 5.0
 SPLIT_VELOCITY_STD = 10.0
 
 
-def resolution_in_force(cfg: ExtendedConfig, R: np.ndarray) -> ExtendedConfig:
-    """``cfg`` with the resolution distance in force for a batch whose detections have the
-    position covariances ``R (n, 2, 2)``, and the group speed spread scaled with it:
+#: A sensor's position noise counts for the resolution distance this long (s) after its last
+#: batch ...
+NOISE_MEMORY = 60.0
+#: ... and for at most this many sensors (the latest).
+NOISE_SENSORS = 64
 
-        d_res = min(resolution_distance, k σ̃),   σ̃ = median_i sqrt(λ_max(R_i)),
+
+def position_noise(R: np.ndarray) -> float | None:
+    """The position noise of a batch's detections: ``σ̃ = median_i sqrt(λ_max(R_i))`` (m) of
+    their covariances ``R (n, 2, 2)``; ``None`` for none."""
+    if len(R) == 0:
+        return None
+    return float(np.median(np.sqrt(max_eigenvalue_2x2(R))))
+
+
+def remembered_noise(
+    noise: tuple[tuple[str, float, float], ...], sensor: str, sigma: float | None, t: float
+) -> tuple[tuple[str, float, float], ...]:
+    """``noise`` (sensor, σ̃, time) with ``sensor``'s ``sigma`` at ``t`` (when given), less
+    the entries older than :data:`NOISE_MEMORY` and beyond the :data:`NOISE_SENSORS` latest."""
+    kept = [e for e in noise if e[0] != sensor and t - e[2] <= NOISE_MEMORY]
+    if sigma is not None:
+        kept.append((sensor, sigma, t))
+    else:
+        kept += [e for e in noise if e[0] == sensor and t - e[2] <= NOISE_MEMORY]
+    return tuple(sorted(kept, key=lambda e: e[2])[-NOISE_SENSORS:])
+
+
+def resolution_in_force(cfg: ExtendedConfig, sigma: float | None) -> ExtendedConfig:
+    """``cfg`` with the resolution distance in force for detections of position noise
+    ``sigma`` (m; the coarsest of the recent sensors, :func:`remembered_noise`), and the group
+    speed spread scaled with it:
+
+        d_res = min(resolution_distance, k σ̃),
         spread = group_speed_spread · d_res / resolution_distance,
 
-    ``k`` = ``resolution_noise_factor`` (0, or no detections: the configured values). The
+    ``k`` = ``resolution_noise_factor`` (0, or no ``sigma``: the configured values). The
     configured distance suits a radar (tens of metres of noise; a convoy's vehicles 30-150 m
     apart are one group); a camera with 0.3 m of noise sees pedestrians metres apart as
     separate targets, not as one object 200 m across. The spread scales with the distance
     (members of a group stay within it of each other for as long): pedestrians walking
-    1-2 m/s in different directions are within 3 m/s of each other, yet no group."""
+    1-2 m/s in different directions are within 3 m/s of each other, yet no group. The
+    coarsest recent sensor decides, so that a radar and a camera watching one scene see the
+    same groups."""
     k = cfg.resolution_noise_factor
-    if k <= 0 or len(R) == 0:
+    if k <= 0 or sigma is None:
         return cfg
-    sigma = float(np.median(np.sqrt(max_eigenvalue_2x2(R))))
     d = k * sigma
     if d >= cfg.resolution_distance:
         return cfg
+    return _scaled(cfg, d)
+
+
+@functools.lru_cache(maxsize=32)
+def _scaled(cfg: ExtendedConfig, d: float) -> ExtendedConfig:
     return replace(
         cfg,
         resolution_distance=d,
@@ -225,6 +263,8 @@ class _State:
     time: float | None = None
     #: Confirmed individual tracks seen inside an extent and moving with it: scans in a row.
     absorbing: tuple[tuple[str, int], ...] = ()
+    #: Each recent sensor's position noise (:func:`position_noise`) and latest batch time.
+    noise: tuple[tuple[str, float, float], ...] = ()
 
 
 def extent_ellipse(X: np.ndarray) -> Extent:
@@ -382,15 +422,16 @@ class _PointGates:
         reach: float,
         ve: tuple[float, float],
         spread: float,
-        own: tuple[float, frozenset[str]] = (math.inf, frozenset()),
+        own: tuple[float, frozenset[str], float] = (math.inf, frozenset(), 0.0),
     ) -> set[int]:
         """What the confirmed tracks not moving with an extended track would take of its
         detections ``rows`` (ascending, all within ``reach`` of ``centre``; ``points`` as
         :func:`_points` gives them): for each track whose velocity is more than ``spread``
         (m/s) from ``ve`` (:func:`_moves_with` with no allowance for uncertainty), the
         detection nearest to it in its gate (Mahalanobis; of equally near ones the first), if
-        any; but for the extended track's own (``own``: its origin and its visitors; tracks
-        created since the origin that are no visitor). Only the tracks whose gate can
+        any; but for the extended track's own (``own``: its origin, its visitors and the
+        fastest group; tracks created since the origin, no visitor, no faster than that,
+        as :func:`_hybridize` absorbs). Only the tracks whose gate can
         reach that far are looked at (``d² ≤ χ² λ_max(Pp + R) ≤ χ² (tr Pp + tr R)``), on
         floats, operation for operation as the array formulas."""
         if not (rows and self.rows.size):
@@ -402,8 +443,11 @@ class _PointGates:
         ks = np.flatnonzero(dx * dx + dy * dy <= r * r)
         if ks.size == 0:
             return set()
-        origin, visitors = own
+        origin, visitors, max_speed = own
         mine = np.take(self.created, ks) >= origin
+        if mine.any():
+            v = np.take(self.v, ks, axis=0)
+            mine &= np.hypot(v[:, 0], v[:, 1]) <= max_speed
         if mine.any():
             ids = self._ids
             mine[mine] = [ids[int(self.rows[k])] not in visitors for k in ks[mine].tolist()]
@@ -550,13 +594,15 @@ class ExtendedTracker(SavesImmutableState):
 
     def propose(self, scan: Scan, view: PointTrackView) -> PeerProposal:
         state = self._state
-        cfg, tm = resolution_in_force(state.config, scan.R), state.management
+        cfg, tm = state.config, state.management
         t = float(scan.time)
         claimed = np.zeros(scan.size, dtype=bool)
         if not cfg.enabled:
             gone = tuple(tr.id for tr in state.tracks if tr.confirmed)
-            new_state = replace(state, tracks=(), candidates=(), time=t)
+            new_state = replace(state, tracks=(), candidates=(), time=t, noise=())
             return PeerProposal(claimed=claimed, deleted=gone, state=new_state)
+        noise = remembered_noise(state.noise, scan.sensor_id, position_noise(scan.R), t)
+        cfg = resolution_in_force(cfg, max((e[1] for e in noise), default=None))
         lam = tm.clutter_density if scan.clutter_density is None else float(scan.clutter_density)
         log_lam = math.log(lam)
         next_id = state.next_id
@@ -693,6 +739,7 @@ class ExtendedTracker(SavesImmutableState):
             next_id=next_id,
             time=t,
             absorbing=tuple((tid, k) for tid, k in seen.items() if tid not in take),
+            noise=noise,
         )
         return PeerProposal(
             claimed=claimed,
@@ -889,7 +936,11 @@ def _gated_subsets(
         reach,
         (v0, v1),
         cfg.group_speed_spread,
-        (math.inf, frozenset()) if track is None else (track.origin, track.visitors),
+        (
+            (math.inf, frozenset(), 0.0)
+            if track is None
+            else (track.origin, track.visitors, cfg.max_speed)
+        ),
     )
     if theirs:
         rows = [r for r in rows if r not in theirs]

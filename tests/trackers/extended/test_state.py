@@ -12,6 +12,7 @@ import pytest
 from clients.scenarios.extended import convoy_scenario
 from trackers.config import TrackerConfig
 from trackers.extended.tracker import ExtendedTracker
+from trackers.peers import PointTrackView
 from trackers.pipeline import TrackingPipeline
 from trackers.state import StateError, StateSection, decode_state, encode_state
 from trackers.types import Scan
@@ -127,3 +128,38 @@ def test_a_track_started_by_hand_ahead_of_the_last_scan_is_restored() -> None:
     q = TrackingPipeline.all_kinds(TrackerConfig())
     q.import_state(decode_state(encode_state(p.export_state()))[0])
     assert [t.id for t in q.snapshot() if t.kind == "extended"] == ["E1"]
+
+
+def test_the_sensors_position_noise_is_kept_and_older_files_have_none() -> None:
+    """The resolution distance in force follows the coarsest recent sensor: its noise comes
+    back after a restart; a file written before it was kept reads as no sensor yet."""
+    ext = ExtendedTracker(TrackerConfig())
+    for t, sensor, sigma in ((0.0, "radar", 15.0), (0.5, "camera", 0.3)):
+        z = np.array([[10.0 * t, 0.0]])
+        ext.commit(ext.propose(Scan(sensor, t, z, np.eye(2)[None] * sigma**2), _empty_view(t)))
+    section = ext.export_state()
+    back = ExtendedTracker(TrackerConfig())
+    back.import_state(section)
+    kept = [(s, round(v, 6)) for s, v, _ in back._state.noise]
+    assert kept == [("radar", 15.0), ("camera", 0.3)]
+    arrays = {k: v for k, v in section.arrays.items() if "noise" not in k}
+    old = StateSection(section.values, arrays)
+    older = ExtendedTracker(TrackerConfig())
+    older.import_state(old)
+    assert older._state.noise == ()
+    with pytest.raises(StateError, match=r"noise\.sigma: must be positive"):
+        older.import_state(_edited(section, **{"noise.sigma": -section.arrays["noise.sigma"]}))
+
+
+def _empty_view(t: float) -> PointTrackView:
+    return PointTrackView(
+        time=t,
+        ids=(),
+        x=np.zeros((0, 5)),
+        P=np.zeros((0, 5, 5)),
+        score=np.zeros(0),
+        hits=np.zeros(0, dtype=np.int64),
+        confirmed=np.zeros(0, dtype=bool),
+        created=np.zeros(0),
+        updated=np.zeros(0),
+    )

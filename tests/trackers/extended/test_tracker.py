@@ -10,7 +10,13 @@ import pytest
 
 from clients.scenarios.extended import convoy_scenario, harbour_scenario, run_figures
 from trackers.config import TrackerConfig
-from trackers.extended.tracker import ExtendedTracker, extent_ellipse, resolution_in_force
+from trackers.extended.tracker import (
+    ExtendedTracker,
+    extent_ellipse,
+    position_noise,
+    remembered_noise,
+    resolution_in_force,
+)
 from trackers.pipeline import TrackingPipeline
 from trackers.types import Scan
 
@@ -302,16 +308,27 @@ def test_a_birth_candidate_moves_along_the_least_squares_line_of_its_centroids()
     assert _Candidate.first((1.0, 2.0), 3.0).velocity == pytest.approx([0.0, 0.0])
 
 
-def test_the_resolution_in_force_follows_the_position_noise():
+def test_the_resolution_in_force_follows_the_coarsest_recent_sensor():
     cfg = TrackerConfig().extended
-    camera = resolution_in_force(cfg, np.tile(np.eye(2) * 0.3**2, (5, 1, 1)))
-    assert camera.resolution_distance == pytest.approx(12.0)
-    assert camera.group_speed_spread == pytest.approx(3.0 * 12.0 / 200.0)
-    radar = np.array([np.diag([5.0**2, 5.0**2]), np.diag([50.0**2, 1.0])])
+    camera = position_noise(np.tile(np.eye(2) * 0.3**2, (5, 1, 1)))
+    assert camera == pytest.approx(0.3)
+    fine = resolution_in_force(cfg, camera)
+    assert fine.resolution_distance == pytest.approx(12.0)
+    assert fine.group_speed_spread == pytest.approx(3.0 * 12.0 / 200.0)
+    radar = position_noise(np.array([np.diag([5.0**2, 5.0**2]), np.diag([50.0**2, 1.0])]))
     assert resolution_in_force(cfg, radar) is cfg  # 40 sigma above 200 m: as configured
-    assert resolution_in_force(cfg, np.zeros((0, 2, 2))) is cfg
+    assert position_noise(np.zeros((0, 2, 2))) is None
+    assert resolution_in_force(cfg, None) is cfg
     off = replace(cfg, resolution_noise_factor=0.0)
-    assert resolution_in_force(off, np.tile(np.eye(2) * 0.09, (5, 1, 1))) is off
+    assert resolution_in_force(off, camera) is off
+    # a radar and a camera on one scene: the radar's noise decides while it reports
+    noise = remembered_noise((), "radar", 15.0, 0.0)
+    noise = remembered_noise(noise, "camera", camera, 0.5)
+    assert max(e[1] for e in noise) == 15.0
+    noise = remembered_noise(noise, "camera", None, 30.0)  # an empty batch keeps its entry
+    assert [e[0] for e in noise] == ["radar", "camera"]
+    noise = remembered_noise(noise, "camera", camera, 61.0)  # the radar is silent 61 s
+    assert noise == (("camera", camera, 61.0),)
 
 
 def _walkers(seed: int, T: float = 0.1, duration: float = 25.0):
