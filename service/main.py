@@ -429,11 +429,14 @@ def create_app(settings: Settings | None = None, token_source: str | None = None
         tracker_config = tracker_config.merged({"formation": {"enabled": True}})
         log.info("demo formation: formation tracking switched on (formation.enabled)")
     log.info(
-        "state folder %s; configuration file %s",
+        "state folder %s; configuration file %s; tracks %s",
         settings.state_dir,
         "none (changes are not saved)"
         if settings.config_file is None
         else f"{settings.config_file} ({'loaded' if loaded else 'written at the first change'})",
+        "not saved (a restart begins with none, and ids from T1 again: --state-file keeps them)"
+        if settings.state_file is None
+        else f"saved to {settings.state_file}",
     )
     stats = Stats(settings.instance_id, settings.ingest_queue_size)
     engine = Engine(
