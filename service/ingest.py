@@ -323,31 +323,29 @@ class ReorderBuffer:
         """With no reorder window: the batches that may go now, in time order. A batch goes
         once no other sensor is ``expected`` to send one of its time or earlier, or once one
         held batch of its time or later has waited ``wait`` seconds of wall time."""
+        return self._release(
+            now, wait, lambda t, batch: wait <= 0 or not expected(t, batch.sensor_id)
+        )
+
+    def due(self, now: float, window: float) -> Iterator[tuple[Item, DetectionBatchIn]]:
+        """The batches that may go now, in time order (all of them when ``window`` <= 0)."""
+        return self._release(
+            now, window, lambda t, _: window <= 0 or t <= self.newest_time - window
+        )
+
+    def _release(
+        self, now: float, wait: float, may_go: Callable[[float, DetectionBatchIn], bool]
+    ) -> Iterator[tuple[Item, DetectionBatchIn]]:
+        """The held batches in time order while the first ``may_go``; then, once some held
+        batch has waited ``wait`` seconds of wall time, it and every older one."""
         heap = self._heap
         while heap:
             t, _, item, batch = heap[0]
-            if wait <= 0 or not expected(t, batch.sensor_id):
+            if may_go(t, batch):
                 heapq.heappop(heap)
                 yield item, batch
                 continue
             expired = [e for e in heap if now - e[2].arrived >= wait]
-            if not expired:
-                return
-            cutoff = max(e[0] for e in expired)
-            while heap and heap[0][0] <= cutoff:
-                _, _, held, held_batch = heapq.heappop(heap)
-                yield held, held_batch
-
-    def due(self, now: float, window: float) -> Iterator[tuple[Item, DetectionBatchIn]]:
-        """The batches that may go now, in time order (all of them when ``window`` <= 0)."""
-        heap = self._heap
-        while heap:
-            t, _, item, batch = heap[0]
-            if window <= 0 or t <= self.newest_time - window:
-                heapq.heappop(heap)
-                yield item, batch
-                continue
-            expired = [e for e in heap if now - e[2].arrived >= window]
             if not expired:
                 return
             cutoff = max(e[0] for e in expired)
