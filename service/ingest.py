@@ -13,6 +13,7 @@ from a payload that failed validation (:func:`peek`, which reads at most a bound
 from __future__ import annotations
 
 import bisect
+import functools
 import hashlib
 import heapq
 import itertools
@@ -178,15 +179,22 @@ _V = TypeVar("_V")
 
 
 def _recently_seen(
-    by_sensor: OrderedDict[str, _V], sensor_id: str, make: Callable[[], _V], most: int
+    by_sensor: OrderedDict[str, _V],
+    sensor_id: str,
+    make: Callable[[], _V],
+    most: int,
+    forget: Callable[[str], None] | None = None,
 ) -> _V:
     """``sensor_id``'s entry of a per-sensor memory, made by ``make`` if it has none, now the
-    most recently seen; beyond ``most`` sensors the least recently seen is forgotten."""
+    most recently seen; beyond ``most`` sensors the least recently seen is forgotten (and
+    ``forget`` called with it)."""
     entry = by_sensor.get(sensor_id)
     if entry is None:
         entry = by_sensor[sensor_id] = make()
         if len(by_sensor) > most:
-            by_sensor.popitem(last=False)
+            gone, _ = by_sensor.popitem(last=False)
+            if forget is not None:
+                forget(gone)
     else:
         by_sensor.move_to_end(sensor_id)
     return entry
@@ -218,16 +226,8 @@ class SensorClocks:
         self._longest = 0.0  # no interval has been longer
 
     def accepted(self, sensor_id: str, time: float, wall: float | None = None) -> None:
-        times = self._times.get(sensor_id)
-        if times is None:
-            times = self._times[sensor_id] = deque(maxlen=self.gaps + 1)
-            if len(self._times) > self.sensors:
-                gone, _ = self._times.popitem(last=False)
-                self._interval.pop(gone, None)
-                self._wall.pop(gone, None)
-                self._undue(gone)
-        else:
-            self._times.move_to_end(sensor_id)
+        make = functools.partial(deque, maxlen=self.gaps + 1)
+        times = _recently_seen(self._times, sensor_id, make, self.sensors, self._forget)
         times.append(time)
         gaps = sorted(b - a for a, b in pairwise(times) if b > a)
         interval = gaps[len(gaps) // 2] if gaps else 0.0
@@ -240,6 +240,11 @@ class SensorClocks:
             due = time + interval
             bisect.insort(self._due, (due, sensor_id))
             self._due_of[sensor_id] = due
+
+    def _forget(self, sensor_id: str) -> None:
+        self._interval.pop(sensor_id, None)
+        self._wall.pop(sensor_id, None)
+        self._undue(sensor_id)
 
     def _undue(self, sensor_id: str) -> None:
         due = self._due_of.pop(sensor_id, None)

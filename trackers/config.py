@@ -308,10 +308,9 @@ class TrackManagementConfig:
     score falls ``delete_drop_from_peak`` below its peak, or when it has had no detection for
     ``max_coast_time`` seconds, or, once confirmed with 5 detections, 2.5 revisits of its
     sensor if that is longer (a GMTI every 10 s misses a vehicle twice in a row now and
-    then); time spent inside an extended track's
-    resolution cell counts
-    at the rate ``extended.in_cell_pd / pd`` there (the object hides it: a vehicle beside a
-    convoy coasts that much longer).
+    then); time spent inside an extended track's resolution cell counts at the rate
+    ``extended.in_cell_pd / pd`` there (the object hides it: a vehicle beside a convoy
+    coasts that much longer).
     """
 
     pd: float = _field(0.9, "detection probability, when a batch carries none", gt=0, le=1)

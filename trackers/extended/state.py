@@ -136,17 +136,18 @@ def read_state(section: StateSection, base: _State, id_prefix: str = "") -> _Sta
     absorbing_scans = r.integers("absorbing.scans", (a,), ge=0)
     noise: tuple[tuple[str, float, float], ...] = ()
     if r.has("noise.sigma"):  # files written before it was kept have none
-        s = r.floats("noise.sigma", (r.length("noise.sigma"),))
-        if (s <= 0).any():
-            raise StateError("peer/extended: noise.sigma: must be positive")
-        n_s = int(s.shape[0])
+        sigma = r.floats("noise.sigma", (r.length("noise.sigma"),))
+        n_s = int(sigma.shape[0])
         sensors = [x or "" for x in r.strings("noise.sensors", n_s)]
         times = r.floats("noise.time", (n_s,))
-        noise = tuple(zip(sensors, s.tolist(), times.tolist(), strict=True))
+        noise = tuple(zip(sensors, sigma.tolist(), times.tolist(), strict=True))
     r.finish()
 
     def bad(detail: str) -> StateError:
         return StateError(f"peer/extended: {detail}")
+
+    if any(e[1] <= 0 for e in noise):
+        raise bad("noise.sigma: must be positive")
 
     check_tracks(
         "peer/extended",
