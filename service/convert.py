@@ -53,6 +53,7 @@ def batch_to_scan(batch: DetectionBatchIn, position_std: float) -> Scan:
             pd=batch.pd,
             clutter_density=batch.clutter_density,
             sensor_position=_opt_array(batch.sensor_position),
+            sensor_velocity=_opt_array(batch.sensor_velocity),
         )
     z = np.array([(d["x"], d["y"]) for d in dets], dtype=float)
     R = np.array([d.get("cov") or default for d in dets], dtype=float)
@@ -67,6 +68,7 @@ def batch_to_scan(batch: DetectionBatchIn, position_std: float) -> Scan:
         pd=batch.pd,
         clutter_density=batch.clutter_density,
         sensor_position=_opt_array(batch.sensor_position),
+        sensor_velocity=_opt_array(batch.sensor_velocity),
         range_rate=range_rate,
         amplitude=amplitude,
     )

@@ -58,11 +58,11 @@ DEFAULT_QUEUE_BYTES = 32 * 1024 * 1024
 #: lists of two numbers: 7 values), vr, amplitude and id.
 MAX_VALUES_PER_DETECTION = 13
 #: JSON values of a batch besides its detections at most: the object, sensor_id, time, the
-#: detections list, cov (7), sensor_position (3), pd and clutter_density.
-MAX_VALUES_PER_BATCH = 16
+#: detections list, cov (7), sensor_position (3), sensor_velocity (3), pd and clutter_density.
+MAX_VALUES_PER_BATCH = 19
 #: Keys of a detection and of a batch at most: their fields.
 MAX_KEYS_PER_DETECTION = 6
-MAX_KEYS_PER_BATCH = 7
+MAX_KEYS_PER_BATCH = 8
 
 _QUOTE = ord('"')
 _KEEP = b'"{[,:'

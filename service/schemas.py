@@ -199,6 +199,11 @@ class DetectionBatchIn(BaseModel):
     sensor_position: tuple[Position, Position] | None = Field(
         default=None, description="[x, y] of the sensor, m (for range-rates)"
     )
+    sensor_velocity: tuple[RangeRate, RangeRate] | None = Field(
+        default=None,
+        description="[vx, vy] of a moving sensor, m/s (its range-rates are seen from it;"
+        " needs sensor_position)",
+    )
     pd: Annotated[Finite, Field(gt=0.0, le=1.0)] | None = None
     clutter_density: Annotated[Finite, Field(gt=0.0, le=1.0)] | None = Field(
         default=None, description="false-alarm density per m²"
@@ -206,8 +211,8 @@ class DetectionBatchIn(BaseModel):
 
     @model_validator(mode="after")
     def _after(self) -> DetectionBatchIn:
-        """No unknown field, in the batch or a detection; range-rates only with the sensor's
-        position."""
+        """No unknown field, in the batch or a detection; range-rates and the sensor's velocity
+        only with the sensor's position."""
         extra = self.__pydantic_extra__
         if extra:
             raise ValueError(f"{next(iter(extra))}: unknown field")
@@ -218,6 +223,8 @@ class DetectionBatchIn(BaseModel):
                 for key in det:
                     if key not in DETECTION_FIELDS:
                         raise ValueError(f"detections[{i}].{key}: unknown field")
+        if self.sensor_position is None and self.sensor_velocity is not None:
+            raise ValueError("sensor_velocity: needs the batch's sensor_position")
         if self.sensor_position is None and "vr" in keys:
             for i, det in enumerate(dets):
                 if det.get("vr") is not None:

@@ -1068,9 +1068,10 @@ def _with_range_rates(
     config: TrackerConfig,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """The pairs' posteriors updated again with their detections' range-rates, where the
-    scan has them and a sensor position (:func:`trackers.filters.imm.imm_range_rate_update`),
-    and their log-likelihoods grown by the range-rate's likelihood ratio against a false
-    alarm's, uniform within ``±initiation.max_speed``: ``ln Λ + ln(2 v_max)``.
+    scan has them and a sensor position (:func:`trackers.filters.imm.imm_range_rate_update`;
+    seen from a moving sensor when the scan gives its velocity ``v_s``), and their
+    log-likelihoods grown by the range-rate's likelihood ratio against a false alarm's,
+    uniform within ``±v_max``, ``v_max = initiation.max_speed + |v_s|``: ``ln Λ + ln(2 v_max)``.
 
     A range-rate outside its gate in every mode (``ν_j²/S_j > γ₁``, one degree of freedom,
     ``gating.gate_probability``) is not used: the pair keeps its position-only update, so a
@@ -1085,11 +1086,12 @@ def _with_range_rates(
     if have.size == 0:
         return x, P, mu, loglik
     sensor = np.asarray(scan.sensor_position, dtype=float)
+    v_s = scan.sensor_velocity
     variance = config.measurement.range_rate_std**2
     K, M, n = x[have].shape
     xm = x[have].reshape(K * M, n)
     nu, S = range_rate_innovation(
-        xm, P[have].reshape(K * M, n, n), np.repeat(rdot[have], M), sensor, variance
+        xm, P[have].reshape(K * M, n, n), np.repeat(rdot[have], M), sensor, variance, v_s
     )
     inside = (nu * nu <= config.gating.threshold_1d * S).reshape(K, M).any(axis=1)
     far = (np.hypot(xm[:, 0] - sensor[0], xm[:, 1] - sensor[1]) >= MIN_RANGE).reshape(K, M)
@@ -1098,10 +1100,11 @@ def _with_range_rates(
         return x, P, mu, loglik
     x, P, mu, loglik = x.copy(), P.copy(), mu.copy(), loglik.copy()
     xh, Ph, muh, dll = imm_range_rate_update(
-        x[have], P[have], mu[have], rdot[have], sensor, variance
+        x[have], P[have], mu[have], rdot[have], sensor, variance, v_s
     )
     x[have], P[have], mu[have] = xh, Ph, muh
-    loglik[have] += dll + math.log(2.0 * config.initiation.max_speed)
+    v_max = config.initiation.max_speed + (0.0 if v_s is None else math.hypot(*v_s))
+    loglik[have] += dll + math.log(2.0 * v_max)
     return x, P, mu, loglik
 
 

@@ -109,7 +109,7 @@ def check_scan(scan: Scan, last_time: float | None) -> None:
     Checks: finite time within ``±MAX_ABS_TIME`` not older than ``last_time``; finite
     positions with ``|x|, |y| ≤ MAX_ABS_POSITION``; symmetric positive definite covariances
     with entries ``≤ MAX_VARIANCE`` in magnitude; ``pd`` in (0, 1] and ``clutter_density``
-    > 0 when given.
+    > 0 when given; a finite ``sensor_position`` and ``sensor_velocity`` when given.
     """
     if not math.isfinite(scan.time):
         raise ScanRejected("invalid_scan", "time: not a finite number")
@@ -138,6 +138,10 @@ def check_scan(scan: Scan, last_time: float | None) -> None:
         math.isfinite(scan.clutter_density) and scan.clutter_density > 0
     ):
         raise ScanRejected("invalid_scan", "clutter_density: must be a finite number > 0")
+    for name in ("sensor_position", "sensor_velocity"):
+        value = getattr(scan, name)
+        if value is not None and not np.isfinite(value).all():
+            raise ScanRejected("invalid_scan", f"{name}: not finite")
 
 
 def _check_magnitudes(z: np.ndarray, R: np.ndarray) -> None:

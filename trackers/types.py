@@ -44,6 +44,8 @@ class Scan:
     pd : the sensor's detection probability for this scan, or ``None`` for the configured one.
     clutter_density : false-alarm density λ_fa per m², or ``None`` for the configured one.
     sensor_position : ``(2,)`` sensor position, needed to use range-rates.
+    sensor_velocity : ``(2,)`` sensor velocity (m/s) for range-rates seen from a moving
+        sensor (an airborne radar), or ``None`` for a sensor at rest.
     range_rate : ``(n,)`` range-rates in m/s, NaN where a detection has none (or ``None``).
     amplitude : ``(n,)`` amplitudes, NaN where absent (or ``None``).
     """
@@ -58,6 +60,7 @@ class Scan:
     sensor_position: np.ndarray | None = None
     range_rate: np.ndarray | None = None
     amplitude: np.ndarray | None = None
+    sensor_velocity: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         z = np.asarray(self.z, dtype=float).reshape(-1, 2)
@@ -72,6 +75,13 @@ class Scan:
         if len(ids) != z.shape[0]:
             raise ScanRejected("invalid_scan", f"{z.shape[0]} detections but {len(ids)} ids")
         object.__setattr__(self, "detection_ids", ids)
+        for name in ("sensor_position", "sensor_velocity"):
+            value = getattr(self, name)
+            if value is not None:
+                arr = np.asarray(value, dtype=float).reshape(-1)
+                if arr.shape[0] != 2:
+                    raise ScanRejected("invalid_scan", f"{name}: must be [x, y]")
+                object.__setattr__(self, name, arr)
         for name in ("range_rate", "amplitude"):
             value = getattr(self, name)
             if value is not None:
@@ -102,6 +112,7 @@ class Scan:
             sensor_position=self.sensor_position,
             range_rate=None if self.range_rate is None else self.range_rate[idx],
             amplitude=None if self.amplitude is None else self.amplitude[idx],
+            sensor_velocity=self.sensor_velocity,
         )
 
 

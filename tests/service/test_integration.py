@@ -381,6 +381,7 @@ def test_health_metrics_and_docs(service: RunningService, peer: zenoh.Session) -
         # The configuration document is typed down to each tracker field, from one tree.
         assert schemas["InitiationSection"]["properties"]["max_speed"]["default"] == 700.0
         assert schemas["ConfigDocument"]["additionalProperties"] is False
+        assert "sensor_velocity" in schemas["DetectionBatchIn"]["properties"]
         assert json.dumps(spec).count("#/components/schemas/") > 5
         assert http.get("/docs").status_code == 200
 

@@ -102,6 +102,7 @@ def _batch(dets: list[dict[str, Any]], **extra: Any) -> dict[str, Any]:
         "detections": dets,
         "cov": [[25.5, 0.25], [0.25, 25.5]],
         "sensor_position": [-123456.789, 987654.321],
+        "sensor_velocity": [-123.456789, 98.7654321],
         "pd": 0.9,
         "clutter_density": 1.5e-6,
         **extra,

@@ -71,6 +71,7 @@ def test_contract_example_passes() -> None:
         _batch(pd=1.0),
         _batch(cov=[[4, 1], [1, 4]]),
         _batch(sensor_position=[1, 2], detections=[{"x": 1, "y": 2, "vr": -3}]),
+        _batch(sensor_position=[1, 2], sensor_velocity=[-150.5, 20]),
     ],
 )
 def test_good_batches_pass(payload: dict[str, Any]) -> None:
@@ -130,6 +131,22 @@ BAD: list[tuple[bytes, str, str]] = [
         "invalid_batch",
         "detections[4].vr: needs the batch's sensor_position",
     ),
+    (
+        orjson.dumps(_batch(sensor_velocity=[200.0, 0.0])),
+        "invalid_batch",
+        "sensor_velocity: needs the batch's sensor_position",
+    ),
+    (
+        b'{"sensor_id": "r", "time": 1, "detections": [], "sensor_position": [0, 0],'
+        b' "sensor_velocity": [1, NaN]}',
+        "invalid_batch",
+        "sensor_velocity",
+    ),
+    (
+        orjson.dumps(_batch(sensor_position=[0, 0], sensor_velocity=[1.0])),
+        "invalid_batch",
+        "sensor_velocity",
+    ),
     (orjson.dumps(_batch(pd=0)), "invalid_batch", "pd: must be > 0"),
     (orjson.dumps(_batch(pd=1.5)), "invalid_batch", "pd: must be <= 1"),
     (orjson.dumps(_batch(clutter_density=0)), "invalid_batch", "clutter_density: must be > 0"),
@@ -187,6 +204,13 @@ def test_covariance_precedence_and_arrays() -> None:
     assert scan.amplitude is not None and math.isnan(scan.amplitude[0])
     assert scan.amplitude[1] == 7.0
     assert scan.sensor_position is not None and scan.sensor_position.tolist() == [10, 20]
+    assert scan.sensor_velocity is None  # a sensor at rest unless the batch says otherwise
+    moving = batch_to_scan(
+        decode_batch(orjson.dumps(_batch(sensor_position=[1, 2], sensor_velocity=[-150, 20]))),
+        10.0,
+    )
+    assert moving.sensor_velocity is not None and moving.sensor_velocity.tolist() == [-150, 20]
+    assert moving.subset(np.arange(5) < 2).sensor_velocity.tolist() == [-150, 20]
 
     no_cov = batch_to_scan(decode_batch(orjson.dumps(_batch())), position_std=3.0)
     assert no_cov.R.shape == (5, 2, 2)

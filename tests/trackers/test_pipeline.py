@@ -90,6 +90,12 @@ def state(p):
         (scan_at(5.0, [0, 0], pd=0.0), "invalid_scan", "pd"),
         (scan_at(5.0, [0, 0], clutter_density=-1.0), "invalid_scan", "clutter_density"),
         (scan_at(0.5, [0, 0]), "out_of_sequence", "older"),
+        (scan_at(5.0, [0, 0], sensor_position=[0.0, np.inf]), "invalid_scan", "sensor_position"),
+        (
+            scan_at(5.0, [0, 0], sensor_position=[0.0, 0.0], sensor_velocity=[np.nan, 1.0]),
+            "invalid_scan",
+            "sensor_velocity: not finite",
+        ),
     ],
 )
 def test_bad_scans_are_rejected_and_change_nothing(scan, reason, text):
@@ -114,6 +120,9 @@ def test_range_rates_and_amplitudes_are_one_per_detection():
             Scan("s", 0.0, z, R, **{name: np.ones(3)})
     scan = Scan("s", 0.0, z, R, range_rate=[1.0, np.nan], sensor_position=np.zeros(2))
     assert scan.range_rate.shape == (2,) and np.isnan(scan.range_rate[1])
+    for name in ("sensor_position", "sensor_velocity"):
+        with pytest.raises(ScanRejected, match=f"{name}: must be"):
+            Scan("s", 0.0, z, R, **{name: np.ones(3)})
 
 
 def test_equal_times_are_in_sequence():

@@ -270,9 +270,11 @@ def imm_range_rate_update(
     rdot: np.ndarray,
     sensor: np.ndarray,
     variance: float,
+    sensor_velocity: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """The mode-conditioned posteriors of :func:`imm_update` updated again, in sequence, with
-    range-rates ``rdot (N,)`` of variance ``σ_ṙ²`` from ``sensor (2,)``
+    range-rates ``rdot (N,)`` of variance ``σ_ṙ²`` from ``sensor (2,)`` moving at
+    ``sensor_velocity (2,)`` (None: at rest)
     (:func:`trackers.models.measurement.range_rate_update` in every mode)::
 
         x_j, P_j, ln Λ_j = range_rate_update(x_j, P_j, ṙ)
@@ -286,7 +288,7 @@ def imm_range_rate_update(
     N, M, n = _check_shapes(x, P, mu)
     rdot = np.repeat(np.asarray(rdot, dtype=float).reshape(N), M)
     xs, Ps, ll = range_rate_update(
-        x.reshape(N * M, n), P.reshape(N * M, n, n), rdot, sensor, variance
+        x.reshape(N * M, n), P.reshape(N * M, n, n), rdot, sensor, variance, sensor_velocity
     )
     ll = ll.reshape(N, M)
     log_w = ll + np.log(np.maximum(mu, _TINY))

@@ -2,9 +2,10 @@
 
 Detections are positions ``z = [x, y]`` in metres: ``z = H s + v`` with ``v ~ N(0, R)`` and
 ``H = H_POSITION``. A detection may also carry a range-rate ``ṙ`` (m/s, Doppler) seen from
-the sensor at ``p_s``: ``ṙ = h(s) + w``, ``w ~ N(0, σ_ṙ²)``, with
+the sensor at ``p_s`` moving at ``v_s`` (zero for a sensor on the ground):
+``ṙ = h(s) + w``, ``w ~ N(0, σ_ṙ²)``, with
 
-    h(s) = ((x − x_s) vx + (y − y_s) vy) / ρ,   ρ = ‖(x − x_s, y − y_s)‖
+    h(s) = ((x − x_s)(vx − vx_s) + (y − y_s)(vy − vy_s)) / ρ,   ρ = ‖(x − x_s, y − y_s)‖
 
 applied after the position by an extended Kalman update (:func:`range_rate_update`).
 """
@@ -39,43 +40,73 @@ H_POSITION.setflags(write=False)
 MIN_RANGE = 1.0
 
 
-def range_rate(x: np.ndarray, sensor: np.ndarray) -> np.ndarray:
-    """``h(s) = ((x − x_s) vx + (y − y_s) vy) / ρ`` of states ``x (K, n)``: the range-rate the
-    sensor at ``sensor (2,)`` sees (m/s, positive going away)."""
+def _relative(
+    x: np.ndarray, sensor: np.ndarray, sensor_velocity: np.ndarray | None
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """``x − x_s``, ``y − y_s``, ``ρ`` (at least :data:`MIN_RANGE`) and the velocity relative
+    to the sensor ``vx − vx_s``, ``vy − vy_s`` of states ``x (K, n)``."""
     dx, dy = x[:, 0] - sensor[0], x[:, 1] - sensor[1]
     rho = np.maximum(np.hypot(dx, dy), MIN_RANGE)
-    return (dx * x[:, 2] + dy * x[:, 3]) / rho
+    if sensor_velocity is None:
+        return dx, dy, rho, x[:, 2], x[:, 3]
+    return dx, dy, rho, x[:, 2] - sensor_velocity[0], x[:, 3] - sensor_velocity[1]
 
 
-def range_rate_jacobian(x: np.ndarray, sensor: np.ndarray) -> np.ndarray:
-    """``∂h/∂s`` of :func:`range_rate`, ``(K, n)``::
+def range_rate(
+    x: np.ndarray, sensor: np.ndarray, sensor_velocity: np.ndarray | None = None
+) -> np.ndarray:
+    """``h(s) = ((x − x_s)(vx − vx_s) + (y − y_s)(vy − vy_s)) / ρ`` of states ``x (K, n)``: the
+    range-rate the sensor at ``sensor (2,)`` moving at ``sensor_velocity (2,)`` (None: at
+    rest) sees (m/s, positive going away)."""
+    dx, dy, rho, wx, wy = _relative(x, sensor, sensor_velocity)
+    return (dx * wx + dy * wy) / rho
 
-    ∂h/∂x = vx/ρ − h (x − x_s)/ρ²,   ∂h/∂y = vy/ρ − h (y − y_s)/ρ²,
+
+def range_rate_jacobian(
+    x: np.ndarray, sensor: np.ndarray, sensor_velocity: np.ndarray | None = None
+) -> np.ndarray:
+    """``∂h/∂s`` of :func:`range_rate`, ``(K, n)``, with ``w = v − v_s`` the velocity relative
+    to the sensor::
+
+    ∂h/∂x = wx/ρ − h (x − x_s)/ρ²,   ∂h/∂y = wy/ρ − h (y − y_s)/ρ²,
     ∂h/∂vx = (x − x_s)/ρ,            ∂h/∂vy = (y − y_s)/ρ,   ∂h/∂ω = 0
     """
-    dx, dy = x[:, 0] - sensor[0], x[:, 1] - sensor[1]
-    rho = np.maximum(np.hypot(dx, dy), MIN_RANGE)
-    h = (dx * x[:, 2] + dy * x[:, 3]) / rho
+    dx, dy, rho, wx, wy = _relative(x, sensor, sensor_velocity)
+    h = (dx * wx + dy * wy) / rho
     J = np.zeros_like(x)
-    J[:, 0] = x[:, 2] / rho - h * dx / rho**2
-    J[:, 1] = x[:, 3] / rho - h * dy / rho**2
+    J[:, 0] = wx / rho - h * dx / rho**2
+    J[:, 1] = wy / rho - h * dy / rho**2
     J[:, 2] = dx / rho
     J[:, 3] = dy / rho
     return J
 
 
 def _innovation_terms(
-    x: np.ndarray, P: np.ndarray, rdot: np.ndarray, sensor: np.ndarray, variance: float
+    x: np.ndarray,
+    P: np.ndarray,
+    rdot: np.ndarray,
+    sensor: np.ndarray,
+    variance: float,
+    sensor_velocity: np.ndarray | None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """``J``, ``P Jᵀ``, ``S = J P Jᵀ + σ_ṙ²`` and ``ν = ṙ − h(x)``."""
-    J = range_rate_jacobian(x, sensor)
+    J = range_rate_jacobian(x, sensor, sensor_velocity)
     PJ = np.einsum("kij,kj->ki", P, J)
     S = np.einsum("ki,ki->k", J, PJ) + float(variance)
-    return J, PJ, S, rdot - range_rate(x, sensor)
+    return J, PJ, S, rdot - range_rate(x, sensor, sensor_velocity)
+
+
+def _velocity(sensor_velocity: np.ndarray | None) -> np.ndarray | None:
+    return None if sensor_velocity is None else np.asarray(sensor_velocity, float).reshape(2)
 
 
 def range_rate_innovation(
-    x: np.ndarray, P: np.ndarray, rdot: np.ndarray, sensor: np.ndarray, variance: float
+    x: np.ndarray,
+    P: np.ndarray,
+    rdot: np.ndarray,
+    sensor: np.ndarray,
+    variance: float,
+    sensor_velocity: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """``ν = ṙ − h(x)`` and ``S = J P Jᵀ + σ_ṙ²`` of states ``x (K, n)``, ``P (K, n, n)``: the
     range-rate innovation and its variance, for gating (``ν²/S ≤ γ₁``)."""
@@ -85,15 +116,22 @@ def range_rate_innovation(
         np.asarray(rdot, dtype=float),
         np.asarray(sensor, dtype=float).reshape(2),
         variance,
+        _velocity(sensor_velocity),
     )
     return nu, S
 
 
 def range_rate_update(
-    x: np.ndarray, P: np.ndarray, rdot: np.ndarray, sensor: np.ndarray, variance: float
+    x: np.ndarray,
+    P: np.ndarray,
+    rdot: np.ndarray,
+    sensor: np.ndarray,
+    variance: float,
+    sensor_velocity: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Extended Kalman update of states ``x (K, n)``, ``P (K, n, n)`` with range-rates
-    ``rdot (K,)`` of variance ``σ_ṙ²`` seen from ``sensor (2,)``::
+    ``rdot (K,)`` of variance ``σ_ṙ²`` seen from ``sensor (2,)`` moving at
+    ``sensor_velocity (2,)`` (None: at rest)::
 
         ν = ṙ − h(x),  J = ∂h/∂s (x),  S = J P Jᵀ + σ_ṙ²,  K = P Jᵀ / S
         x⁺ = x + K ν,  P⁺ = (I − K J) P (I − K J)ᵀ + K σ_ṙ² Kᵀ  (Joseph form)
@@ -105,7 +143,7 @@ def range_rate_update(
     P = np.asarray(P, dtype=float)
     rdot = np.asarray(rdot, dtype=float)
     sensor = np.asarray(sensor, dtype=float).reshape(2)
-    J, PJ, S, nu = _innovation_terms(x, P, rdot, sensor, variance)
+    J, PJ, S, nu = _innovation_terms(x, P, rdot, sensor, variance, _velocity(sensor_velocity))
     gain = PJ / S[:, None]
     x_new = x + gain * nu[:, None]
     n = x.shape[1]

@@ -59,6 +59,30 @@ def test_range_rate_jacobian_against_finite_differences() -> None:
         np.testing.assert_allclose(J[:, i], fd, rtol=1e-6, atol=1e-9)
 
 
+def test_a_moving_sensor_sees_the_velocity_relative_to_it() -> None:
+    # Sensor at the origin flying east at 100 m/s: a parked target due east closes at
+    # 100 m/s, one due north neither closes nor recedes, one 45° off closes at 100/√2.
+    sensor, v_s = np.zeros(2), np.array([100.0, 0.0])
+    x = np.array([[5e3, 0.0, 0.0, 0.0, 0.0], [0.0, 5e3, 0.0, 0.0, 0.0], [5e3, 5e3, 0.0, 0.0, 0.0]])
+    np.testing.assert_allclose(range_rate(x, sensor, v_s), [-100.0, 0.0, -100.0 / np.sqrt(2)])
+    # a target flying with the sensor shows no range-rate; at rest, it is the old model
+    x[:, 2] = 100.0
+    np.testing.assert_allclose(range_rate(x, sensor, v_s), 0.0, atol=1e-12)
+    np.testing.assert_allclose(range_rate(x, sensor, np.zeros(2)), range_rate(x, sensor))
+
+
+def test_range_rate_jacobian_of_a_moving_sensor_against_finite_differences() -> None:
+    sensor, v_s = np.array([100.0, -200.0]), np.array([-180.0, 60.0])
+    x = _states()
+    J = range_rate_jacobian(x, sensor, v_s)
+    eps = 1e-4
+    for i in range(x.shape[1]):
+        step = np.zeros_like(x)
+        step[:, i] = eps
+        fd = (range_rate(x + step, sensor, v_s) - range_rate(x - step, sensor, v_s)) / (2 * eps)
+        np.testing.assert_allclose(J[:, i], fd, rtol=1e-6, atol=1e-9)
+
+
 def test_range_rate_update_is_the_ekf_step() -> None:
     sensor = np.array([0.0, 0.0])
     x = np.array([[3000.0, 4000.0, 10.0, 0.0, 0.0]])
