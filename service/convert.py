@@ -16,6 +16,7 @@ import numpy as np
 import orjson
 
 from service.schemas import DetectionBatchIn, DetectionIn
+from trackers.coverage import Coverage
 from trackers.types import Scan, StepResult, TrackSnapshot
 
 __all__ = [
@@ -33,7 +34,8 @@ _NAN = math.nan
 def batch_to_scan(batch: DetectionBatchIn, position_std: float) -> Scan:
     """The batch as a Scan. Each detection's covariance is its own ``cov``, else the batch's
     ``cov``, else ``position_std² I``; range-rates and amplitudes are NaN where absent (and the
-    arrays are ``None`` when no detection has one)."""
+    arrays are ``None`` when no detection has one); its coverage from ``coverage`` and
+    ``max_range``."""
     dets = batch.detections
     n = len(dets)
     if batch.cov is not None:
@@ -54,6 +56,7 @@ def batch_to_scan(batch: DetectionBatchIn, position_std: float) -> Scan:
             clutter_density=batch.clutter_density,
             sensor_position=_opt_array(batch.sensor_position),
             sensor_velocity=_opt_array(batch.sensor_velocity),
+            coverage=_coverage(batch),
         )
     z = np.array([(d["x"], d["y"]) for d in dets], dtype=float)
     R = np.array([d.get("cov") or default for d in dets], dtype=float)
@@ -69,8 +72,21 @@ def batch_to_scan(batch: DetectionBatchIn, position_std: float) -> Scan:
         clutter_density=batch.clutter_density,
         sensor_position=_opt_array(batch.sensor_position),
         sensor_velocity=_opt_array(batch.sensor_velocity),
+        coverage=_coverage(batch),
         range_rate=range_rate,
         amplitude=amplitude,
+    )
+
+
+def _coverage(batch: DetectionBatchIn) -> Coverage | None:
+    """The batch's ``coverage`` polygon and ``max_range`` about ``sensor_position`` (both
+    validated), or ``None`` when it gives neither."""
+    if batch.coverage is None and batch.max_range is None:
+        return None
+    return Coverage(
+        polygon=None if batch.coverage is None else np.array(batch.coverage, dtype=float),
+        centre=_opt_array(batch.sensor_position),
+        max_range=batch.max_range,
     )
 
 

@@ -28,6 +28,7 @@ from typing import Any
 import numpy as np
 
 from service.schemas import BatchError, DetectionBatchIn
+from trackers.coverage import MAX_VERTICES
 
 __all__ = [
     "DEFAULT_MAX_BATCH_BYTES",
@@ -58,11 +59,12 @@ DEFAULT_QUEUE_BYTES = 32 * 1024 * 1024
 #: lists of two numbers: 7 values), vr, amplitude and id.
 MAX_VALUES_PER_DETECTION = 13
 #: JSON values of a batch besides its detections at most: the object, sensor_id, time, the
-#: detections list, cov (7), sensor_position (3), sensor_velocity (3), pd and clutter_density.
-MAX_VALUES_PER_BATCH = 19
+#: detections list, cov (7), sensor_position (3), sensor_velocity (3), max_range, coverage
+#: (a list of up to MAX_VERTICES lists of two numbers), pd and clutter_density.
+MAX_VALUES_PER_BATCH = 21 + 3 * MAX_VERTICES
 #: Keys of a detection and of a batch at most: their fields.
 MAX_KEYS_PER_DETECTION = 6
-MAX_KEYS_PER_BATCH = 8
+MAX_KEYS_PER_BATCH = 10
 
 _QUOTE = ord('"')
 _KEEP = b'"{[,:'

@@ -32,6 +32,7 @@ from pydantic import (
 )
 from typing_extensions import TypedDict  # pydantic needs this one before Python 3.12
 
+from trackers.coverage import MAX_VERTICES
 from trackers.pipeline import MAX_ABS_POSITION, MAX_ABS_TIME, MAX_VARIANCE
 
 __all__ = [
@@ -137,6 +138,17 @@ def _check_spd(cov: tuple[tuple[float, float], tuple[float, float]]) -> Any:
 
 
 #: A 2x2 symmetric positive definite matrix given as ``[[a, b], [b, d]]``.
+def _check_area(polygon: list[tuple[float, float]]) -> Any:
+    """A coverage polygon must enclose some area (shoelace formula, ``|Σ x_i y_{i+1} −
+    x_{i+1} y_i| / 2 > 0``): one whose vertices lie on a line covers nothing."""
+    twice = 0.0
+    for (x0, y0), (x1, y1) in zip(polygon, polygon[1:] + polygon[:1], strict=True):
+        twice += x0 * y1 - x1 * y0
+    if not abs(twice) > 0.0:
+        raise ValueError("the polygon encloses no area")
+    return polygon
+
+
 Cov2 = Annotated[
     tuple[tuple[Variance, Variance], tuple[Variance, Variance]], AfterValidator(_check_spd)
 ]
@@ -204,6 +216,23 @@ class DetectionBatchIn(BaseModel):
         description="[vx, vy] of a moving sensor, m/s (its range-rates are seen from it;"
         " needs sensor_position)",
     )
+    max_range: Annotated[Finite, Field(gt=0.0, le=MAX_ABS_POSITION)] | None = Field(
+        default=None,
+        description="the sensor looked out to this range from sensor_position, m: a track"
+        " beyond it is not counted as missed (needs sensor_position)",
+    )
+    coverage: (
+        Annotated[
+            list[tuple[Position, Position]],
+            Field(min_length=3, max_length=MAX_VERTICES),
+            AfterValidator(_check_area),
+        ]
+        | None
+    ) = Field(
+        default=None,
+        description="the polygon [[x, y], ...] the sensor looked at, m: a track outside it is"
+        " not counted as missed",
+    )
     pd: Annotated[Finite, Field(gt=0.0, le=1.0)] | None = None
     clutter_density: Annotated[Finite, Field(gt=0.0, le=1.0)] | None = Field(
         default=None, description="false-alarm density per m²"
@@ -225,6 +254,8 @@ class DetectionBatchIn(BaseModel):
                         raise ValueError(f"detections[{i}].{key}: unknown field")
         if self.sensor_position is None and self.sensor_velocity is not None:
             raise ValueError("sensor_velocity: needs the batch's sensor_position")
+        if self.sensor_position is None and self.max_range is not None:
+            raise ValueError("max_range: needs the batch's sensor_position")
         if self.sensor_position is None and "vr" in keys:
             for i, det in enumerate(dets):
                 if det.get("vr") is not None:
@@ -254,8 +285,8 @@ _MESSAGES = {
     "model_type": "not an object",
     "model_attributes_type": "not an object",
     "dict_type": "not an object",
-    "too_long": "too many items",
-    "too_short": "too few items",
+    "too_long": "too many items (at most {max_length})",
+    "too_short": "too few items (at least {min_length})",
     "string_too_long": "longer than {max_length} characters",
     "greater_than": "must be > {gt}",
     "less_than_equal": "must be <= {le}",

@@ -30,7 +30,7 @@ from dataclasses import dataclass, fields, replace
 
 import numpy as np
 
-from trackers.association.gating import gate
+from trackers.association.gating import gate, max_eigenvalue_2x2
 from trackers.association.gnn import gnn_assign
 from trackers.association.manoeuvre import ManoeuvreMatch, manoeuvre_search
 from trackers.association.spatial import pairs_within
@@ -350,7 +350,7 @@ class IndividualTracker:
                     if p is not None:
                         pd[i] = p
             masked = np.minimum(pd / pd_sensor, 1.0)
-            tracks, claims = self._update_existing(pred, scan, pd, lam_fa)
+            tracks, claims = self._update_existing(pred, scan, pd, lam_fa, _in_view(pred, scan))
             rivals = ~_best_of_each_origin(tracks)  # dropped with the deleted tracks below
 
         if config.initiation.method == "two_point":
@@ -406,12 +406,13 @@ class IndividualTracker:
         return PointProposal(result=result, released=released, state=(self._version, state))
 
     def _update_existing(
-        self, pred: _Prediction, scan: Scan, pd: np.ndarray, lam_fa: float
+        self, pred: _Prediction, scan: Scan, pd: np.ndarray, lam_fa: float, seen: np.ndarray
     ) -> tuple[TrackArrays, np.ndarray]:
         """The tracks updated with this scan (``pd`` the detection probability of each), and
         each detection's *claim*: ``+inf`` where a confirmed track took it or has it in its
         gate, the updated score of the tentative track that took it, ``−inf`` where it is
-        free."""
+        free. A track that is not ``seen`` (out of the scan's coverage) and takes no detection
+        keeps its score: it was not missed, only not looked at."""
         config, tracks = pred.config, pred.tracks
         x_pred, P_pred, c_bar, xc, Pc = pred.x_pred, pred.P_pred, pred.c_bar, pred.xc, pred.Pc
         pairs = gate(xc[:, :2], Pc[:, :2, :2], scan.z, scan.R, config.gating.threshold)
@@ -434,7 +435,7 @@ class IndividualTracker:
         taken[dj[sel]] = True
         # A confirmed track with nothing in its gate looks again, within the reach of a
         # manoeuvre since its last update, among the detections no confirmed track gates.
-        found = _manoeuvre_found(pred, scan, ti[sel], dj[first], pd, lam_fa)
+        found = _manoeuvre_found(pred, scan, ti[sel], dj[first], pd, lam_fa, seen)
         if found is not None:
             taken[found.detection] = True
             zero = np.zeros(found.track.size)
@@ -449,7 +450,7 @@ class IndividualTracker:
         at, ad = ti[sel], dj[sel]
 
         x, P, mu = x_pred.copy(), P_pred.copy(), c_bar.copy()
-        score = tracks.score + miss_increment(pd)
+        score = tracks.score + np.where(seen, miss_increment(pd), 0.0)
         xu, Pu, muu, hit = xu[sel], Pu[sel], muu[sel], hit[sel]
         if found is not None:
             at, ad = np.concatenate([at, found.track]), np.concatenate([ad, found.detection])
@@ -1024,12 +1025,13 @@ def _manoeuvre_found(
     gated: np.ndarray,
     pd: np.ndarray,
     lam_fa: float,
+    seen: np.ndarray,
 ) -> ManoeuvreMatch | None:
-    """:func:`manoeuvre_search` for the confirmed tracks not in ``assigned`` over the
-    detections not in ``gated`` (those in a confirmed track's gate), its indices turned into
-    the scan's tracks and detections."""
+    """:func:`manoeuvre_search` for the confirmed tracks in view (``seen``) not in
+    ``assigned`` over the detections not in ``gated`` (those in a confirmed track's gate), its
+    indices turned into the scan's tracks and detections."""
     config, tracks = pred.config, pred.tracks
-    lost = tracks.confirmed.copy()
+    lost = tracks.confirmed & seen
     lost[assigned] = False
     lost = np.flatnonzero(lost)
     free = np.ones(scan.size, dtype=bool)
@@ -1056,6 +1058,16 @@ def _manoeuvre_found(
     if found is None:
         return None
     return replace(found, track=lost[found.track], detection=free[found.detection])
+
+
+def _in_view(pred: _Prediction, scan: Scan) -> np.ndarray:
+    """Whether each predicted track is in the scan's coverage, or its gate reaches into it
+    (``√(γ λ_max(P))`` from its edge); all of them when the scan covers everything."""
+    n = len(pred.tracks)
+    if scan.coverage is None:
+        return np.ones(n, dtype=bool)
+    reach = np.sqrt(pred.config.gating.threshold * max_eigenvalue_2x2(pred.Pc[:, :2, :2]))
+    return scan.coverage.contains(pred.xc[:, :2], reach)
 
 
 def _with_range_rates(

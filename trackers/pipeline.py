@@ -5,8 +5,11 @@ The pipeline checks a scan once, then runs its trackers in two phases (see
 what it would do with the scan, seeing the point tracks predicted to the scan's time; the
 *point tracker* proposes its step on the detections no peer claimed, under what the peers
 asked of it (detection probabilities, tracks taken over and handed back); only then does each
-commit. A rejected scan raises :class:`~trackers.types.ScanRejected`, and a failing or
-ill-formed peer :class:`~trackers.peers.PeerError`, before any tracker has changed.
+commit. A scan that says nothing of its coverage is given the area its sensor has been
+seeing things in while several sensors report (:mod:`trackers.coverage`), so that a track out
+of its view is not counted as missed. A rejected scan raises
+:class:`~trackers.types.ScanRejected`, and a failing or ill-formed peer
+:class:`~trackers.peers.PeerError`, before any tracker has changed.
 
 The point tracker is chosen by ``association.method`` (:data:`POINT_TRACKERS`) or injected.
 """
@@ -21,6 +24,7 @@ from typing import Any
 import numpy as np
 
 from trackers.config import TrackerConfig
+from trackers.coverage import CoverageLearner
 from trackers.extended.tracker import ExtendedTracker
 from trackers.formation.tracker import FormationTracker
 from trackers.individual import IndividualTracker
@@ -209,6 +213,9 @@ class TrackingPipeline:
         self._last_time: float | None = None
         self._hand_in: dict[str, PointTrackState] = {}
         self._hand_over: set[str] = set()
+        # Where each sensor looks, for scans that do not say (not saved: relearned in a few
+        # scans after a restart).
+        self._coverage = CoverageLearner()
 
     @classmethod
     def all_kinds(
@@ -280,16 +287,27 @@ class TrackingPipeline:
             hand_in=tuple(self._hand_in.values()),
         )
 
+    def _committed(self, scan: Scan) -> None:
+        """After every tracker has taken ``scan``: its time is the last, the hand-overs are
+        done, and its detections say where its sensor looks."""
+        self._last_time = scan.time
+        self._hand_in.clear()
+        self._hand_over.clear()
+        self._coverage.learn(scan.sensor_id, scan.time, scan.z, scan.R)
+
     def process(self, scan: Scan) -> StepResult:
         """Run one scan through every tracker. Raise ``ScanRejected`` for an unusable scan and
         ``PeerError`` for a failing peer; either way no tracker changes."""
         check_scan(scan, self._last_time)
+        given = scan
+        if scan.coverage is None:
+            learned = self._coverage.coverage(scan.sensor_id, scan.time, scan.z, scan.R)
+            if learned is not None:
+                scan = replace(scan, coverage=learned)
         if not self.peers:
             proposal = self.point.propose(scan, self._with_hand_over(PointDirectives()))
             self.point.commit(proposal)
-            self._last_time = scan.time
-            self._hand_in.clear()
-            self._hand_over.clear()
+            self._committed(given)
             return proposal.result
         view = self.point.predicted(scan.time)
         # The peers see the scan one after another, each without the detections claimed
@@ -320,9 +338,7 @@ class TrackingPipeline:
         for peer, prop in zip(self.peers, proposals, strict=True):
             peer.commit(prop)
         self.point.commit(point)
-        self._last_time = scan.time
-        self._hand_in.clear()
-        self._hand_over.clear()
+        self._committed(given)
         peer_all = tuple(t for prop in proposals for t in prop.tracks)
         peer_confirmed = tuple(t for t in peer_all if t.confirmed)
         deleted = tuple(d for prop in proposals for d in prop.deleted)

@@ -14,6 +14,8 @@ from typing import NamedTuple
 
 import numpy as np
 
+from trackers.coverage import Coverage
+
 __all__ = ["Extent", "Scan", "ScanRejected", "StepResult", "TrackSnapshot"]
 
 
@@ -46,6 +48,9 @@ class Scan:
     sensor_position : ``(2,)`` sensor position, needed to use range-rates.
     sensor_velocity : ``(2,)`` sensor velocity (m/s) for range-rates seen from a moving
         sensor (an airborne radar), or ``None`` for a sensor at rest.
+    coverage : the area the sensor looked at (:class:`~trackers.coverage.Coverage`): a track
+        outside it is not counted as missed. ``None``: everywhere, or, when several sensors
+        report, where this one has been seeing things (the pipeline's learned coverage).
     range_rate : ``(n,)`` range-rates in m/s, NaN where a detection has none (or ``None``).
     amplitude : ``(n,)`` amplitudes, NaN where absent (or ``None``).
     """
@@ -61,6 +66,7 @@ class Scan:
     range_rate: np.ndarray | None = None
     amplitude: np.ndarray | None = None
     sensor_velocity: np.ndarray | None = None
+    coverage: Coverage | None = None
 
     def __post_init__(self) -> None:
         z = np.asarray(self.z, dtype=float).reshape(-1, 2)
@@ -113,6 +119,7 @@ class Scan:
             range_rate=None if self.range_rate is None else self.range_rate[idx],
             amplitude=None if self.amplitude is None else self.amplitude[idx],
             sensor_velocity=self.sensor_velocity,
+            coverage=self.coverage,
         )
 
 

@@ -4,9 +4,10 @@ service (every operation, generated valid and invalid requests, with the bearer 
 One check is left out, deliberately: ``positive_data_acceptance`` (a request that fits the
 schema must be accepted). The service also refuses, with 422 and a detail naming the rule,
 what a JSON schema cannot state: rules across fields (a detection's ``vr`` and the batch's
-``sensor_velocity`` need the batch's ``sensor_position``; ``motion``'s lists have one entry per model and its probabilities sum to
-1; the confirmation threshold must exceed the deletion threshold) and rules over time (a batch
-older than the last processed one). The operations' descriptions say so.
+``sensor_velocity`` and ``max_range`` need the batch's ``sensor_position``; ``motion``'s lists
+have one entry per model and its probabilities sum to 1; the confirmation threshold must
+exceed the deletion threshold) and rules over time (a batch older than the last processed
+one). The operations' descriptions say so.
 """
 
 from __future__ import annotations

@@ -5,10 +5,12 @@ what they spare, and the duplicate keys a JSON parser would hide."""
 from __future__ import annotations
 
 import json
+import math
 import random
 import tracemalloc
 from typing import Any
 
+import numpy as np
 import orjson
 import pytest
 from hypothesis import given, settings
@@ -27,6 +29,7 @@ from service.payload import (
     shape_bound,
 )
 from service.schemas import BatchError, IngestConfig, decode_batch
+from trackers.coverage import MAX_VERTICES
 
 
 def _walk(doc: Any) -> Shape:
@@ -103,6 +106,11 @@ def _batch(dets: list[dict[str, Any]], **extra: Any) -> dict[str, Any]:
         "cov": [[25.5, 0.25], [0.25, 25.5]],
         "sensor_position": [-123456.789, 987654.321],
         "sensor_velocity": [-123.456789, 98.7654321],
+        "max_range": 123456.789,
+        "coverage": [
+            [123456.789 * math.cos(a), 987654.321 * math.sin(a)]
+            for a in np.linspace(0.0, 2.0 * np.pi, MAX_VERTICES, endpoint=False).tolist()
+        ],
         "pd": 0.9,
         "clutter_density": 1.5e-6,
         **extra,

@@ -72,6 +72,8 @@ def test_contract_example_passes() -> None:
         _batch(cov=[[4, 1], [1, 4]]),
         _batch(sensor_position=[1, 2], detections=[{"x": 1, "y": 2, "vr": -3}]),
         _batch(sensor_position=[1, 2], sensor_velocity=[-150.5, 20]),
+        _batch(sensor_position=[1, 2], max_range=30e3),
+        _batch(coverage=[[0, 0], [1e4, 0], [1e4, 1e4], [0, 1e4]]),
     ],
 )
 def test_good_batches_pass(payload: dict[str, Any]) -> None:
@@ -147,6 +149,31 @@ BAD: list[tuple[bytes, str, str]] = [
         "invalid_batch",
         "sensor_velocity",
     ),
+    (
+        orjson.dumps(_batch(max_range=3e4)),
+        "invalid_batch",
+        "max_range: needs the batch's sensor_position",
+    ),
+    (
+        orjson.dumps(_batch(sensor_position=[0, 0], max_range=0)),
+        "invalid_batch",
+        "max_range: must be > 0",
+    ),
+    (
+        orjson.dumps(_batch(coverage=[[0, 0], [1, 1]])),
+        "invalid_batch",
+        "coverage: too few items (at least 3)",
+    ),
+    (
+        orjson.dumps(_batch(coverage=[[0, 0], [1, 1], [2, 2]])),
+        "invalid_batch",
+        "coverage: the polygon encloses no area",
+    ),
+    (
+        orjson.dumps(_batch(coverage=[[0, 0], [1, 0], [1, 2e9]])),
+        "invalid_batch",
+        "coverage[2][1]: must be <= 1e+09",
+    ),
     (orjson.dumps(_batch(pd=0)), "invalid_batch", "pd: must be > 0"),
     (orjson.dumps(_batch(pd=1.5)), "invalid_batch", "pd: must be <= 1"),
     (orjson.dumps(_batch(clutter_density=0)), "invalid_batch", "clutter_density: must be > 0"),
@@ -211,6 +238,18 @@ def test_covariance_precedence_and_arrays() -> None:
     )
     assert moving.sensor_velocity is not None and moving.sensor_velocity.tolist() == [-150, 20]
     assert moving.subset(np.arange(5) < 2).sensor_velocity.tolist() == [-150, 20]
+    assert moving.coverage is None  # a batch that says nothing of its coverage
+    looked = batch_to_scan(
+        decode_batch(
+            orjson.dumps(
+                _batch(sensor_position=[0, 0], max_range=100.0, coverage=[[0, 0], [50, 0], [0, 50]])
+            )
+        ),
+        10.0,
+    )
+    assert looked.coverage is not None and not looked.coverage.learned
+    inside = looked.coverage.contains(np.array([[10.0, 10.0], [40.0, 40.0], [-5.0, 5.0]]))
+    assert inside.tolist() == [True, False, False]
 
     no_cov = batch_to_scan(decode_batch(orjson.dumps(_batch())), position_std=3.0)
     assert no_cov.R.shape == (5, 2, 2)

@@ -52,6 +52,7 @@ from scipy.spatial import cKDTree
 from trackers.association.gating import max_eigenvalue_2x2
 from trackers.association.spatial import pairs_within
 from trackers.config import ExtendedConfig, TrackerConfig, TrackManagementConfig
+from trackers.coverage import Coverage
 from trackers.extended.partition import (
     close_pairs,
     pair_subsets,
@@ -624,6 +625,14 @@ class ExtendedTracker(SavesImmutableState):
         for track in state.tracks:
             dt = max(0.0, t - track.time)
             est = predict(track.estimate, dt, cfg.q, cfg.tau)
+            if scan.coverage is not None and not _in_view(scan.coverage, est):
+                # Out of this sensor's view: not looked at, so not missed either.
+                if _dead(track, t, cfg, tm):
+                    if track.confirmed:
+                        deleted.append(track.id)
+                    continue
+                kept.append(replace(track, estimate=est, time=t, detection_ids=()))
+                continue
             subsets: list[list[int]] = []
             points: dict[int, tuple[float, ...]] = {}
             inside: dict[int, float] | None = None
@@ -786,9 +795,17 @@ class ExtendedTracker(SavesImmutableState):
             if dt <= 0:
                 candidates.append(cand)
                 continue
+            px, py = cand.predicted(t)
+            if (
+                scan.coverage is not None
+                and not scan.coverage.contains(
+                    np.array([[px, py]]), cfg.resolution_distance + cfg.max_speed * dt
+                ).all()
+            ):
+                candidates.append(cand)  # out of view: its run goes on
+                continue
             if not clusters:
                 continue
-            px, py = cand.predicted(t)
             reach = cfg.resolution_distance + (
                 cfg.max_speed * dt if cand.seen == 1 else 2.0 * cfg.group_speed_spread * dt
             )
@@ -1355,6 +1372,16 @@ def _ids(scan: Scan, rows: np.ndarray) -> tuple[str, ...]:
     """The ids of the detections ``rows`` that have one."""
     ids = scan.detection_ids
     return tuple(str(ids[i]) for i in rows.tolist() if ids[i] is not None)
+
+
+def _in_view(coverage: Coverage, est: ExtendedEstimate) -> bool:
+    """Whether an extended track's predicted centroid, or its extent and its 3-sigma centroid
+    uncertainty about it, reach into the scan's coverage."""
+    P = est.P[:2, :2]
+    reach = math.sqrt(float(np.linalg.eigvalsh(est.X)[-1])) + 3.0 * math.sqrt(
+        float(np.linalg.eigvalsh(P)[-1])
+    )
+    return bool(coverage.contains(est.x[None, :2], reach)[0])
 
 
 def _dead(track: ExtendedTrack, t: float, cfg: ExtendedConfig, tm: TrackManagementConfig) -> bool:

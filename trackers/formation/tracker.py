@@ -55,6 +55,7 @@ from trackers.association.gating import inverse_2x2, max_eigenvalue_2x2
 from trackers.association.manoeuvre import manoeuvre_search
 from trackers.association.spatial import pairs_within
 from trackers.config import FormationConfig, MotionConfig, TrackerConfig
+from trackers.coverage import Coverage
 from trackers.extended.partition import component_labels
 from trackers.filters.imm import (
     MU_FLOOR,
@@ -586,6 +587,15 @@ def _update(
     for as departing (one handed back at once would stay the point tracker's, and the
     detection found for it would be lost)."""
     claimed = np.zeros(scan.size, dtype=bool)
+    if scan.coverage is not None and formations:
+        seen = _in_view(formations, scan.coverage)
+        if not seen.all():  # those out of the sensor's view are not looked at, nor missed
+            rows = np.flatnonzero(seen).tolist()
+            looked, claimed = _update([formations[i] for i in rows], scan, config, pd, lam, taken)
+            out = [_missed(f, 0.0) for f in formations]
+            for i, f in zip(rows, looked, strict=True):
+                out[i] = f
+            return out, claimed
     if not formations or scan.size == 0:
         return [_missed(f, pd) for f in formations], claimed
     cfg = config.formation
@@ -823,6 +833,19 @@ def _shared_modes(
         w = np.maximum(w / w.sum(), MU_FLOOR)
         out.append((slice(lo, hi), w / w.sum(), rows[own]))
     return out
+
+
+def _in_view(formations: list[Formation], coverage: Coverage) -> np.ndarray:
+    """Whether each formation's members reach into the scan's coverage: its centre within
+    the farthest member's distance plus three standard deviations of the least certain one."""
+    centres, reach = [], []
+    for f in formations:
+        x, P = f.combined()
+        c = x[:, :2].mean(axis=0)
+        sigma = np.sqrt(max_eigenvalue_2x2(P[:, :2, :2]).max())
+        centres.append(c)
+        reach.append(float(np.hypot(*(x[:, :2] - c).T).max() + 3.0 * sigma))
+    return coverage.contains(np.array(centres), np.array(reach))
 
 
 def _missed(f: Formation, pd: float) -> Formation:

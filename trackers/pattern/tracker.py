@@ -60,6 +60,7 @@ from trackers.config import (
     TrackerConfig,
     TrackManagementConfig,
 )
+from trackers.coverage import Coverage
 from trackers.extended.tracker import _grown, extent_ellipse
 from trackers.pattern.bending import (
     PrincipalModel,
@@ -598,7 +599,10 @@ class PatternTracker(SavesImmutableState):
         kept: list[PatternTrack] = []
         deleted: list[str] = []
         for track in state.tracks:
-            new = self._update(track, scan, tree, claimed, cfg, modes, terms)
+            if scan.coverage is not None and not _in_view(track, t, scan.coverage, modes, cfg):
+                new = track  # out of this sensor's view: not looked at, nor missed
+            else:
+                new = self._update(track, scan, tree, claimed, cfg, modes, terms)
             dead = (t - new.updated > cfg.max_coast_time) or (
                 new.peak - new.score > tm.delete_drop_from_peak
             )
@@ -946,3 +950,16 @@ def _taken(born: list[PatternTrack], view: PointTrackView) -> tuple[str, ...]:
         for i in np.flatnonzero((d <= reach) & ~view.confirmed).tolist():
             out.add(view.ids[i])
     return tuple(sorted(out))
+
+
+def _in_view(
+    track: PatternTrack, t: float, coverage: Coverage, modes: BendingModes, cfg: PointPatternConfig
+) -> bool:
+    """Whether a pattern track's predicted origin, give or take its largest pattern and five
+    standard deviations of its position, is in the scan's coverage."""
+    x, P = track.estimate.x, track.estimate.P
+    dt = max(t - track.time, 0.0)
+    centre = np.array([[x[0] + x[1] * dt, x[2] + x[3] * dt]])
+    spread = P[0, 0] + P[2, 2] + dt * dt * (P[1, 1] + P[3, 3])
+    reach = float(modes.radii.max()) * (1.0 + cfg.scale_tolerance) + 5.0 * math.sqrt(spread)
+    return bool(coverage.contains(centre, reach)[0])

@@ -1,0 +1,190 @@
+"""What a sensor looked at: coverage shapes, the learned coverage, and the trackers' misses."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from trackers.config import TrackerConfig
+from trackers.coverage import (
+    LEARN_SCANS,
+    Coverage,
+    CoverageLearner,
+    point_in_polygon,
+    polygon_distance,
+)
+from trackers.pipeline import TrackingPipeline
+from trackers.types import Scan
+
+SQUARE = np.array([[0.0, 0.0], [10.0, 0.0], [10.0, 10.0], [0.0, 10.0]])
+# An L: the square without its upper right quarter.
+ELL = np.array([[0.0, 0.0], [10.0, 0.0], [10.0, 5.0], [5.0, 5.0], [5.0, 10.0], [0.0, 10.0]])
+
+
+def test_point_in_polygon_worked_cases() -> None:
+    points = np.array([[5.0, 5.0], [-1.0, 5.0], [11.0, 5.0], [5.0, -0.5], [2.0, 8.0], [8.0, 8.0]])
+    assert point_in_polygon(points, SQUARE).tolist() == [True, False, False, False, True, True]
+    assert point_in_polygon(points[:, :], ELL).tolist() == [
+        False,  # (5, 5) is the inner corner: on the boundary, counted outside by the rule
+        False,
+        False,
+        False,
+        True,
+        False,  # the missing quarter
+    ]
+    # either orientation
+    assert (
+        point_in_polygon(points, SQUARE[::-1]).tolist() == point_in_polygon(points, SQUARE).tolist()
+    )
+
+
+def test_polygon_distance_is_to_the_nearest_edge() -> None:
+    d = polygon_distance(np.array([[5.0, 5.0], [13.0, 5.0], [13.0, 14.0], [8.0, 8.0]]), ELL)
+    np.testing.assert_allclose(d, [0.0, 3.0, np.hypot(8.0, 4.0), 3.0])
+
+
+def test_coverage_with_margin_polygon_and_disc() -> None:
+    box = Coverage(polygon=SQUARE)
+    pts = np.array([[5.0, 5.0], [12.0, 5.0], [14.0, 5.0]])
+    assert box.contains(pts).tolist() == [True, False, False]
+    assert box.contains(pts, 2.5).tolist() == [True, True, False]
+    assert box.contains(pts, np.array([0.0, 0.0, 5.0])).tolist() == [True, False, True]
+    disc = Coverage(centre=np.array([0.0, 0.0]), max_range=10.0)
+    assert disc.contains(np.array([[6.0, 8.0], [6.0, 8.1]])).tolist() == [True, False]
+    both = Coverage(polygon=SQUARE, centre=np.array([0.0, 0.0]), max_range=10.0)
+    # inside the square but beyond 10 m of the sensor
+    assert both.contains(np.array([[9.0, 9.0], [3.0, 3.0]])).tolist() == [False, True]
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "text"),
+    [
+        ({}, "a polygon, a max_range, or both"),
+        ({"polygon": SQUARE[:2]}, "3 to"),
+        ({"polygon": np.array([[0.0, 0.0], [1.0, np.nan], [2.0, 0.0]])}, "finite"),
+        ({"max_range": 5.0}, "needs the sensor's position"),
+        ({"max_range": -1.0, "centre": np.zeros(2)}, "> 0"),
+    ],
+)
+def test_a_bad_coverage_is_refused(kwargs: dict, text: str) -> None:
+    with pytest.raises(ValueError, match=text):
+        Coverage(**kwargs)
+
+
+def _scan(sensor: str, t: float, z, sigma: float = 10.0) -> Scan:
+    z = np.asarray(z, dtype=float).reshape(-1, 2)
+    return Scan(sensor, t, z, np.tile(sigma**2 * np.eye(2), (len(z), 1, 1)))
+
+
+def test_the_learner_needs_a_second_sensor_and_learns_its_box() -> None:
+    learner = CoverageLearner()
+    a = _scan("a", 0.0, [[0.0, 0.0], [1000.0, 500.0]])
+    assert learner.coverage("a", 0.0, a.z, a.R) is None  # alone: everywhere
+    learner.learn("a", 0.0, a.z, a.R)
+    b = _scan("b", 1.0, [[50e3, 0.0]])
+    assert learner.coverage("b", 1.0, b.z, b.R) is not None
+    learner.learn("b", 1.0, b.z, b.R)
+    cov = learner.coverage("a", 2.0, np.zeros((0, 2)), np.zeros((0, 2, 2)))
+    assert cov is not None and cov.learned
+    # the box of a's detections, grown by a tenth of its diagonal and 3 sigma (30 m)
+    grow = 0.1 * np.hypot(1000.0, 500.0) + 30.0
+    lo, hi = cov.polygon.min(axis=0), cov.polygon.max(axis=0)
+    np.testing.assert_allclose(lo, [-grow, -grow])
+    np.testing.assert_allclose(hi, [1000.0 + grow, 500.0 + grow])
+    assert cov.contains(np.array([[500.0, 250.0], [50e3, 0.0]])).tolist() == [True, False]
+
+
+def test_the_learner_forgets_old_scans_and_quiet_sensors() -> None:
+    learner = CoverageLearner()
+    learner.learn("b", 0.0, np.array([[50e3, 0.0]]), np.array([100.0 * np.eye(2)]))
+    far = np.array([[5e3, 5e3]])
+    learner.learn("a", 0.0, far, np.array([100.0 * np.eye(2)]))
+    for k in range(1, LEARN_SCANS + 1):
+        learner.learn("a", float(k), np.array([[0.0, 0.0]]), np.array([100.0 * np.eye(2)]))
+    cov = learner.coverage("a", LEARN_SCANS + 1.0, np.zeros((0, 2)), np.zeros((0, 2, 2)))
+    assert cov is not None and not cov.contains(far)[0]  # the old scan's box is gone
+    # b not heard for over 600 s: a is alone again, and covers everything
+    assert learner.coverage("a", 700.0, np.zeros((0, 2)), np.zeros((0, 2, 2))) is None
+
+
+def _two_areas(coverage: str, scans: int = 30, seed: int = 0) -> list:
+    """Radar a sees a target near the origin, radar b one 50 km east, each every 2 s, 1 s
+    apart, Pd 0.9, no clutter stated. ``coverage``: "none" (the scans say nothing; the
+    pipeline learns), "stated" (each scan gives its area), "everywhere" (each scan says it
+    looked everywhere: the old behaviour). The confirmed tracks' (id, score) at the end."""
+    rng = np.random.default_rng(seed)
+    pipe = TrackingPipeline.all_kinds(TrackerConfig())
+    areas = {
+        "a": np.array([[-10e3, -10e3], [10e3, -10e3], [10e3, 10e3], [-10e3, 10e3]]),
+        "b": np.array([[40e3, -10e3], [60e3, -10e3], [60e3, 10e3], [40e3, 10e3]]),
+    }
+    starts = {"a": np.array([0.0, 0.0]), "b": np.array([50e3, 0.0])}
+    v = {"a": np.array([10.0, 0.0]), "b": np.array([0.0, 10.0])}
+    for k in range(scans):
+        for sid, offset in (("a", 0.0), ("b", 1.0)):
+            t = 2.0 * k + offset
+            pos = starts[sid] + v[sid] * t
+            z = (pos + rng.normal(0.0, 20.0, 2))[None] if rng.random() < 0.9 else np.zeros((0, 2))
+            if coverage == "stated":
+                cov = Coverage(polygon=areas[sid])
+            elif coverage == "everywhere":
+                cov = Coverage(
+                    polygon=np.array([[-1e8, -1e8], [1e8, -1e8], [1e8, 1e8], [-1e8, 1e8]])
+                )
+            else:
+                cov = None
+            scan = Scan(sid, t, z, np.tile(400.0 * np.eye(2), (len(z), 1, 1)), coverage=cov)
+            res = pipe.process(scan)
+    return [(tr.id, tr.score) for tr in res.confirmed()]
+
+
+def test_a_radar_watching_elsewhere_does_not_count_misses() -> None:
+    """Before, each batch of radar b was a miss for radar a's track (ln(1 − P_D) = −2.3
+    of score) and the other way round: the tracks started late and died young."""
+    blind = _two_areas("everywhere")
+    for mode in ("none", "stated"):
+        tracks = _two_areas(mode)
+        assert len(tracks) == 2, (mode, tracks)
+        # two targets, two tracks from the first ones, their scores far above the old ones
+        assert sum(s for _, s in tracks) > sum(s for _, s in blind) + 40.0, (mode, tracks, blind)
+
+
+def test_an_extended_object_is_born_though_another_radar_reports_in_between() -> None:
+    """A 200 m ship giving 4 returns a scan to radar a, and radar b reporting one detection
+    28 km away between a's scans: an extended track starts, as with radar a alone (before,
+    each batch of b broke the cluster's run and five point tracks took the ship)."""
+    rng = np.random.default_rng(0)
+    pipe = TrackingPipeline.all_kinds()
+    for k in range(40):
+        t = 2.5 * k
+        c = np.array([0.0, 10e3]) + np.array([6.0, 0.0]) * t
+        z = np.array(
+            [
+                [c[0] + s + rng.normal(0, 15), c[1] + rng.normal(0, 15)]
+                for s in rng.uniform(-100, 100, 4)
+            ]
+        )
+        pipe.process(Scan("a", t, z, np.tile(225 * np.eye(2), (4, 1, 1)), clutter_density=1e-8))
+        zb = np.array([[-20e3 + rng.normal(0, 15), 20e3]])
+        res = pipe.process(
+            Scan("b", t + 0.01, zb, np.array([225 * np.eye(2)]), clutter_density=1e-8)
+        )
+    kinds = sorted(tr.kind for tr in res.confirmed())
+    assert kinds == ["extended", "individual"]  # the ship, and b's lone target
+
+
+def test_a_lone_sensor_covers_everything() -> None:
+    """One sensor: no learned coverage, the scans as they were given."""
+    pipe = TrackingPipeline(TrackerConfig())
+    seen: list = []
+    point = pipe.point
+    original = point.propose
+
+    def spy(scan, directives=None):
+        seen.append(scan.coverage)
+        return original(scan, directives)
+
+    point.propose = spy  # type: ignore[method-assign]
+    for k in range(5):
+        pipe.process(_scan("a", float(k), [[0.0, 0.0]]))
+    assert seen == [None] * 5
