@@ -301,7 +301,9 @@ class GatingConfig:
 class TrackManagementConfig:
     """Log-likelihood-ratio scoring and the sequential test (Blackman and Popoli, ch. 6).
 
-    ``pd`` and ``clutter_density`` (λ_fa, per m²) are used when a scan does not carry its own.
+    ``pd`` and ``clutter_density`` (λ_fa, per m²) are used when a scan does not carry its own;
+    with ``clutter_map`` the density of a scan that carries none is learned per area
+    (:mod:`trackers.clutter`), ``clutter_density`` its prior.
     ``new_target_density`` is λ_nt per m² per scan. The confirmation threshold is
     ``ln((1 − β)/α)`` and the deletion threshold ``ln(β/(1 − α))`` with α =
     ``p_false_confirm`` and β = ``p_true_delete``. A confirmed track is also deleted when its
@@ -316,6 +318,12 @@ class TrackManagementConfig:
     pd: float = _field(0.9, "detection probability, when a batch carries none", gt=0, le=1)
     clutter_density: float = _field(
         1e-6, "false-alarm density per m², when a batch carries none", gt=0, le=1.0
+    )
+    clutter_map: bool = _field(
+        True,
+        "for batches that carry no clutter_density, learn the false-alarm density of each area"
+        " from each sensor's detections that no confirmed track took (clutter_density is then"
+        " the prior)",
     )
     new_target_density: float = _field(1e-7, "new-target density per m² per scan", gt=0, le=1.0)
     p_false_confirm: float = _field(1e-5, "α: probability of confirming a false track", gt=0, lt=1)

@@ -52,7 +52,12 @@ from trackers.models.measurement import H_POSITION, MIN_RANGE, range_rate_innova
 from trackers.models.motion import STATE_DIM, build_models
 from trackers.peers import PointDirectives, PointProposal, PointTrackState, PointTrackView
 from trackers.rows import RowArrays, sort_within_groups
-from trackers.scoring import hit_increment, initial_score, miss_increment, sequential_test
+from trackers.scoring import (
+    hit_increment,
+    initial_score_each,
+    miss_increment,
+    sequential_test,
+)
 from trackers.state import (
     SectionReader,
     StateError,
@@ -324,7 +329,7 @@ class IndividualTracker:
         config, models = pred.config, pred.models
         tm = config.track_management
         pd_sensor = tm.pd if scan.pd is None else float(scan.pd)
-        lam_fa = tm.clutter_density if scan.clutter_density is None else float(scan.clutter_density)
+        lam_fa = _clutter_densities(scan, tm.clutter_density)
         counters = _Counters(self._state.next_id, self._state.next_origin, self.id_prefix)
 
         released: tuple[PointTrackState, ...] = ()
@@ -403,13 +408,24 @@ class IndividualTracker:
                 tracks, names, t, confirmed_only=confirmed_only
             ),
         )
-        return PointProposal(result=result, released=released, state=(self._version, state))
+        return PointProposal(
+            result=result,
+            released=released,
+            state=(self._version, state),
+            clutter=claims < np.inf,
+        )
 
     def _update_existing(
-        self, pred: _Prediction, scan: Scan, pd: np.ndarray, lam_fa: float, seen: np.ndarray
+        self,
+        pred: _Prediction,
+        scan: Scan,
+        pd: np.ndarray,
+        lam_fa: np.ndarray,
+        seen: np.ndarray,
     ) -> tuple[TrackArrays, np.ndarray]:
         """The tracks updated with this scan (``pd`` the detection probability of each), and
-        each detection's *claim*: ``+inf`` where a confirmed track took it or has it in its
+        each detection's *claim* (``lam_fa`` the false-alarm density at each detection):
+        ``+inf`` where a confirmed track took it or has it in its
         gate, the updated score of the tentative track that took it, ``−inf`` where it is
         free. A track that is not ``seen`` (out of the scan's coverage) and takes no detection
         keeps its score: it was not missed, only not looked at."""
@@ -423,7 +439,7 @@ class IndividualTracker:
             x_pred[ti], P_pred[ti], c_bar[ti], scan.z[dj], scan.R[dj], H_POSITION
         )
         xu, Pu, muu, loglik = _with_range_rates(xu, Pu, muu, loglik, scan, dj, config)
-        hit = hit_increment(pd[ti], loglik, lam_fa)
+        hit = hit_increment(pd[ti], loglik, lam_fa[dj])
         gain = hit - miss_increment(pd[ti])
         # Confirmed tracks choose first; tentative tracks share what they leave. A young track
         # with a wide velocity gate would otherwise take a confirmed target's detections.
@@ -499,7 +515,7 @@ class IndividualTracker:
         claims: np.ndarray,
         config: TrackerConfig,
         pd: float,
-        lam_fa: float,
+        lam_fa: np.ndarray,
         counters: _Counters,
         tracks: TrackArrays,
     ) -> tuple[TrackArrays, Candidates]:
@@ -532,7 +548,7 @@ class IndividualTracker:
             gamma=config.gating.threshold,
             max_pairs=init.max_pairs_per_candidate,
             pd=pd,
-            clutter_density=lam_fa,
+            clutter_density=_one_or_each(lam_fa),
             min_score=tm.delete_threshold,
             group_fraction=init.group_fraction,
             group_velocity_std=init.group_velocity_std,
@@ -544,7 +560,7 @@ class IndividualTracker:
                 claims < np.inf,
                 t,
                 pd=pd,
-                clutter_density=lam_fa,
+                clutter_density=float(np.median(lam_fa)) if lam_fa.size else 1.0,
                 max_speed=init.max_speed,
                 slow_fraction=init.slow_target_fraction,
                 floor=tm.delete_threshold,
@@ -574,7 +590,7 @@ class IndividualTracker:
             R=np.concatenate([cand.R[keep], scan.R[idx]]),
             time=np.concatenate([cand.time[keep], np.full(n, t)]),
             score=np.concatenate(
-                [score[keep], np.full(n, initial_score(tm.new_target_density, lam_fa))]
+                [score[keep], initial_score_each(tm.new_target_density, lam_fa[idx])]
             ),
             detection_ids=np.concatenate([cand.detection_ids[keep], fresh_ids]),
             origin=np.concatenate([cand.origin[keep], counters.origins(n)]),
@@ -589,7 +605,7 @@ class IndividualTracker:
         scan: Scan,
         free: np.ndarray,
         config: TrackerConfig,
-        lam_fa: float,
+        lam_fa: np.ndarray,
         counters: _Counters,
     ) -> TrackArrays:
         """A tentative track at each free detection: position z with covariance R, zero
@@ -601,7 +617,7 @@ class IndividualTracker:
         P = np.zeros((n, 4, 4))
         P[:, :2, :2] = scan.R[idx]
         P[:, 2, 2] = P[:, 3, 3] = config.initiation.velocity_std**2
-        L1 = initial_score(config.track_management.new_target_density, lam_fa)
+        L1 = initial_score_each(config.track_management.new_target_density, lam_fa[idx])
         return _new_tracks(
             config,
             scan,
@@ -609,7 +625,7 @@ class IndividualTracker:
             idx,
             x,
             P,
-            score=np.full(n, L1),
+            score=L1,
             hits=1,
             created=np.full(n, float(scan.time)),
             origin=counters.origins(n),
@@ -1024,7 +1040,7 @@ def _manoeuvre_found(
     assigned: np.ndarray,
     gated: np.ndarray,
     pd: np.ndarray,
-    lam_fa: float,
+    lam_fa: np.ndarray,
     seen: np.ndarray,
 ) -> ManoeuvreMatch | None:
     """:func:`manoeuvre_search` for the confirmed tracks in view (``seen``) not in
@@ -1049,7 +1065,7 @@ def _manoeuvre_found(
         scan.z[free],
         scan.R[free],
         pd[lost],
-        lam_fa,
+        lam_fa[free],
         a_max=config.gating.manoeuvre_acceleration,
         omega_max=config.gating.manoeuvre_turn_rate,
         straight_sojourn=config.motion.sojourn_times[0],
@@ -1058,6 +1074,24 @@ def _manoeuvre_found(
     if found is None:
         return None
     return replace(found, track=lost[found.track], detection=free[found.detection])
+
+
+def _clutter_densities(scan: Scan, configured: float) -> np.ndarray:
+    """λ_fa at each of the scan's detections: the density the batch states, else the clutter
+    map's (:mod:`trackers.clutter`), else the configured one."""
+    if scan.clutter_density is not None:
+        return np.full(scan.size, float(scan.clutter_density))
+    if scan.clutter_map is not None:
+        return scan.clutter_map
+    return np.full(scan.size, configured)
+
+
+def _one_or_each(lam: np.ndarray) -> float | np.ndarray:
+    """One density when all detections share it (the usual case: the arithmetic of one
+    number), else the array."""
+    if lam.size == 0 or bool((lam == lam[0]).all()):
+        return float(lam[0]) if lam.size else 1.0
+    return lam
 
 
 def _in_view(pred: _Prediction, scan: Scan) -> np.ndarray:

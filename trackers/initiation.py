@@ -554,7 +554,7 @@ def pair_candidates(
     gamma: float,
     max_pairs: int,
     pd: float,
-    clutter_density: float,
+    clutter_density: float | np.ndarray,
     min_score: float | np.ndarray = -math.inf,
     group_fraction: float = 0.0,
     group_velocity_std: float = 1.0,
@@ -579,6 +579,8 @@ def pair_candidates(
 
     A candidate with a ``group_velocity`` adds the group component (weight
     ``group_fraction``, spread ``group_velocity_std``) to its prior (:func:`_score_pairs`).
+    ``clutter_density`` is one number, or one per detection of ``z`` (a clutter map's): a
+    pair's hit increment then weighs its second detection against the density where it fell.
     """
     dt_all = t - candidates.time
     offered = (dt_all >= MIN_PAIR_INTERVAL).nonzero()[0]
@@ -609,7 +611,12 @@ def pair_candidates(
         group = dict(group_fraction=group_fraction, group_velocity_std=group_velocity_std)
     else:
         group = {}
-    base = base + (math.log(pd) - math.log(clutter_density))
+    if np.ndim(clutter_density) == 0:
+        base = base + (math.log(pd) - math.log(clutter_density))
+        per_detection = None
+    else:  # −ln λ_fa of each free detection, added to each pair below
+        base = base + math.log(pd)
+        per_detection = -np.log(np.asarray(clutter_density, dtype=float).take(free_idx))
     if n_c * n_f <= BRUTE_FORCE_CELLS:
         # Every pair, in (candidate, detection) grids.
         T = np.empty((_ROWS, n_c, n_f))
@@ -622,7 +629,8 @@ def pair_candidates(
         T[_DT] = dt_c[:, None]
         if grouped:
             T[_G0 : _G1 + 1] = vg.T[:, :, None]
-        _score_pairs(T, base[:, None], **kw, **group)
+        pair_base = base[:, None] if per_detection is None else base[:, None] + per_detection
+        _score_pairs(T, pair_base, **kw, **group)
         score = T[_SCORE]
         # Rival pairs of one candidate, or of one detection, are pruned when far less likely
         # than the best of them.
@@ -642,7 +650,19 @@ def pair_candidates(
         T, cols = T.reshape(_ROWS, -1), ci * n_f + fj
     else:
         ci, fj, T, cols = _searched_pairs(
-            cz, cR, dt_c, base, zf, Rf, floor, vg if grouped else None, group, allow, rival, **kw
+            cz,
+            cR,
+            dt_c,
+            base,
+            zf,
+            Rf,
+            floor,
+            vg if grouped else None,
+            group,
+            allow,
+            rival,
+            per_detection,
+            **kw,
         )
         if ci.size == 0:
             return _no_pairs()
@@ -675,10 +695,12 @@ def _searched_pairs(
     group: dict[str, float],
     allow: np.ndarray,
     rival: np.ndarray | None,
+    per_detection: np.ndarray | None,
     **kw: float,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """The pairs of :func:`pair_candidates` in a large problem: each candidate ``i`` (``cz``,
-    ``cR``, ``dt``, ``base`` its rows) searches the free detections ``j`` (``zf``, ``Rf``,
+    ``cR``, ``dt``, ``base`` its rows, to which ``per_detection``, when given, adds the
+    detection's ``−ln λ_fa``) searches the free detections ``j`` (``zf``, ``Rf``,
     ``floor`` a number or theirs, less the candidate's ``allow``, above ``rival`` when
     given) within
     :func:`search_radius`, or within the whole velocity
@@ -689,7 +711,8 @@ def _searched_pairs(
     empty = np.zeros(0, dtype=np.intp)
     none = empty, empty, np.zeros((_ROWS, 0)), empty
     noise = max_eigenvalue_2x2(cR) + float(max_eigenvalue_2x2(Rf).max())
-    radius = search_radius(dt, base + allow, noise, float(np.min(floor)), **kw)
+    top = 0.0 if per_detection is None else float(per_detection.max())  # the best a pair adds
+    radius = search_radius(dt, base + allow + top, noise, float(np.min(floor)), **kw)
     if vg is not None:  # the group term can pass anywhere in the velocity gate
         grouped = np.isfinite(vg).all(axis=1)
         radius[grouped] = kw["max_speed"] * dt[grouped] + np.sqrt(kw["gamma"] * noise[grouped])
@@ -708,7 +731,8 @@ def _searched_pairs(
         dt.take(ci),
         None if vg is None else vg.take(ci, axis=0),
     )
-    _score_pairs(T, base.take(ci), **kw, **group)
+    pair_base = base.take(ci) if per_detection is None else base.take(ci) + per_detection.take(fj)
+    _score_pairs(T, pair_base, **kw, **group)
     score = T[_SCORE]
     # Rival pairs of one candidate, or of one detection, are pruned when far less likely than
     # the best of them.

@@ -292,11 +292,14 @@ class PointDirectives:
 @dataclass(frozen=True, eq=False)
 class PointProposal:
     """A point tracker's proposed step: ``result`` is what the step returns once committed,
-    ``released`` the states of the tracks the peers took; ``state`` is private to the tracker."""
+    ``released`` the states of the tracks the peers took; ``state`` is private to the tracker.
+    ``clutter``, when the tracker says, marks the scan's detections that no confirmed track
+    took or had in its gate (what the pipeline's clutter map counts)."""
 
     result: StepResult
     released: tuple[PointTrackState, ...]
     state: Any
+    clutter: np.ndarray | None = None
 
 
 class PointTracker(Protocol):

@@ -23,6 +23,7 @@ from typing import Any
 
 import numpy as np
 
+from trackers.clutter import ClutterMap
 from trackers.config import TrackerConfig
 from trackers.coverage import CoverageLearner
 from trackers.extended.tracker import ExtendedTracker
@@ -35,6 +36,7 @@ from trackers.peers import (
     PeerTracker,
     PersistentTracker,
     PointDirectives,
+    PointProposal,
     PointTracker,
     PointTrackState,
     PointTrackView,
@@ -216,6 +218,9 @@ class TrackingPipeline:
         # Where each sensor looks, for scans that do not say (not saved: relearned in a few
         # scans after a restart).
         self._coverage = CoverageLearner()
+        # The false-alarm density of each sensor's areas, for scans that state none (not
+        # saved either: it starts again from track_management.clutter_density).
+        self._clutter = ClutterMap()
 
     @classmethod
     def all_kinds(
@@ -287,27 +292,41 @@ class TrackingPipeline:
             hand_in=tuple(self._hand_in.values()),
         )
 
-    def _committed(self, scan: Scan) -> None:
+    def _committed(self, scan: Scan, point: PointProposal, rows: np.ndarray) -> None:
         """After every tracker has taken ``scan``: its time is the last, the hand-overs are
-        done, and its detections say where its sensor looks."""
+        done, and its detections say where its sensor looks and, those of ``rows`` (the point
+        tracker's, the peers' claims left out) that the point tracker marks as ``clutter``
+        (no confirmed track took or gated them), how dense its false alarms are."""
         self._last_time = scan.time
         self._hand_in.clear()
         self._hand_over.clear()
         self._coverage.learn(scan.sensor_id, scan.time, scan.z, scan.R)
+        if scan.clutter_density is None and self.point.config.track_management.clutter_map:
+            mask = point.clutter
+            clutter = rows if mask is None else rows[np.asarray(mask, dtype=bool)]
+            self._clutter.learn(scan.sensor_id, scan.z.take(clutter, axis=0), scan.R)
 
     def process(self, scan: Scan) -> StepResult:
         """Run one scan through every tracker. Raise ``ScanRejected`` for an unusable scan and
         ``PeerError`` for a failing peer; either way no tracker changes."""
         check_scan(scan, self._last_time)
         given = scan
+        learned: dict[str, Any] = {}
         if scan.coverage is None:
-            learned = self._coverage.coverage(scan.sensor_id, scan.time, scan.z, scan.R)
-            if learned is not None:
-                scan = replace(scan, coverage=learned)
+            coverage = self._coverage.coverage(scan.sensor_id, scan.time, scan.z, scan.R)
+            if coverage is not None:
+                learned["coverage"] = coverage
+        tm = self.point.config.track_management
+        if scan.clutter_density is None and tm.clutter_map:
+            learned["clutter_map"] = self._clutter.density(
+                scan.sensor_id, scan.z, tm.clutter_density
+            )
+        if learned:
+            scan = replace(scan, **learned)
         if not self.peers:
             proposal = self.point.propose(scan, self._with_hand_over(PointDirectives()))
             self.point.commit(proposal)
-            self._committed(given)
+            self._committed(given, proposal, np.arange(scan.size))
             return proposal.result
         view = self.point.predicted(scan.time)
         # The peers see the scan one after another, each without the detections claimed
@@ -338,7 +357,7 @@ class TrackingPipeline:
         for peer, prop in zip(self.peers, proposals, strict=True):
             peer.commit(prop)
         self.point.commit(point)
-        self._committed(given)
+        self._committed(given, point, free)
         peer_all = tuple(t for prop in proposals for t in prop.tracks)
         peer_confirmed = tuple(t for t in peer_all if t.confirmed)
         deleted = tuple(d for prop in proposals for d in prop.deleted)

@@ -28,6 +28,7 @@ __all__ = [
     "StatusUpdate",
     "hit_increment",
     "initial_score",
+    "initial_score_each",
     "miss_increment",
     "sequential_test",
 ]
@@ -42,10 +43,15 @@ def initial_score(new_target_density: float, clutter_density: float) -> float:
     return float(np.log(new_target_density) - np.log(clutter_density))
 
 
+def initial_score_each(new_target_density: float, clutter_density: np.ndarray) -> np.ndarray:
+    """``L(1) = ln(λ_nt / λ_fa)`` for each of the densities ``clutter_density (n,)``."""
+    return np.log(new_target_density) - np.log(np.asarray(clutter_density, dtype=float))
+
+
 def hit_increment(
-    pd: np.ndarray | float, log_likelihood: np.ndarray, clutter_density: float
+    pd: np.ndarray | float, log_likelihood: np.ndarray, clutter_density: float | np.ndarray
 ) -> np.ndarray:
-    """ΔL = ln P_D + ln g(z) − ln λ_fa."""
+    """ΔL = ln P_D + ln g(z) − ln λ_fa (λ_fa one number or one per pair)."""
     return np.log(pd) + log_likelihood - np.log(clutter_density)
 
 

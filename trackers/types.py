@@ -48,6 +48,8 @@ class Scan:
     sensor_position : ``(2,)`` sensor position, needed to use range-rates.
     sensor_velocity : ``(2,)`` sensor velocity (m/s) for range-rates seen from a moving
         sensor (an airborne radar), or ``None`` for a sensor at rest.
+    clutter_map : ``(n,)`` false-alarm densities per m² at the detections, learned by the
+        pipeline's clutter map for a scan that states no ``clutter_density`` (or ``None``).
     coverage : the area the sensor looked at (:class:`~trackers.coverage.Coverage`): a track
         outside it is not counted as missed. ``None``: everywhere, or, when several sensors
         report, where this one has been seeing things (the pipeline's learned coverage).
@@ -67,6 +69,7 @@ class Scan:
     amplitude: np.ndarray | None = None
     sensor_velocity: np.ndarray | None = None
     coverage: Coverage | None = None
+    clutter_map: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         z = np.asarray(self.z, dtype=float).reshape(-1, 2)
@@ -88,7 +91,7 @@ class Scan:
                 if arr.shape[0] != 2:
                     raise ScanRejected("invalid_scan", f"{name}: must be [x, y]")
                 object.__setattr__(self, name, arr)
-        for name in ("range_rate", "amplitude"):
+        for name in ("range_rate", "amplitude", "clutter_map"):
             value = getattr(self, name)
             if value is not None:
                 arr = np.asarray(value, dtype=float).reshape(-1)
@@ -120,6 +123,7 @@ class Scan:
             amplitude=None if self.amplitude is None else self.amplitude[idx],
             sensor_velocity=self.sensor_velocity,
             coverage=self.coverage,
+            clutter_map=None if self.clutter_map is None else self.clutter_map[idx],
         )
 
 

@@ -109,7 +109,7 @@ def manoeuvre_search(
     z: np.ndarray,
     R: np.ndarray,
     pd: np.ndarray,
-    clutter_density: float,
+    clutter_density: float | np.ndarray,
     *,
     a_max: float,
     omega_max: float,
@@ -118,7 +118,8 @@ def manoeuvre_search(
 ) -> ManoeuvreMatch | None:
     """Tracks (predicted mode states ``x_pred (N, M, 5)``, ``P_pred``, ``c_bar (N, M)``, their
     combination ``x_comb (N, 5)``, ``P_comb``, time since the last update ``tau``, detection
-    probability ``pd (N,)``) matched to detections ``z (n, 2)``, ``R (n, 2, 2)`` under the
+    probability ``pd (N,)``) matched to detections ``z (n, 2)``, ``R (n, 2, 2)`` (false-alarm
+    density ``clutter_density``, one number or one per detection) under the
     manoeuvre hypothesis: the chi-square gate ``γ`` on ``P_comb + Q_m``, the gain
     ``G = hit + ln p_m − ln(1 − P_D)`` and GNN over the positive gains (module docstring).
     None when nothing is taken."""
@@ -140,9 +141,10 @@ def manoeuvre_search(
     # G ≤ ln(P_D p_m / (2π √|S0| λ_fa)) − ln(1 − P_D). Tracks that cannot gain are left out.
     p_m = -np.expm1(-tau[wide] / straight_sojourn)
     det0 = S0[:, 0, 0] * S0[:, 1, 1] - S0[:, 0, 1] * S0[:, 1, 0]
+    lam = np.broadcast_to(np.asarray(clutter_density, dtype=float), (z.shape[0],))
     with np.errstate(divide="ignore"):
         best = (
-            np.log(pd[wide] * p_m / (2.0 * np.pi * clutter_density)) - 0.5 * np.log(det0)
+            np.log(pd[wide] * p_m / (2.0 * np.pi * float(lam.min()))) - 0.5 * np.log(det0)
         ) - miss_increment(pd[wide])
     hopeful = np.flatnonzero(best > 0)
     if hopeful.size == 0:
@@ -156,7 +158,7 @@ def manoeuvre_search(
         x_pred[ti], P_pred[ti] + Q_t[:, None], c_bar[ti], z[dj], R[dj], H_POSITION
     )
     with np.errstate(divide="ignore"):
-        hit = hit_increment(pd[ti], loglik, clutter_density) + np.log(p_m)
+        hit = hit_increment(pd[ti], loglik, lam[dj]) + np.log(p_m)
     sel = gnn_assign(ti, dj, hit - miss_increment(pd[ti]), N, z.shape[0])
     if sel.size == 0:
         return None

@@ -1,0 +1,134 @@
+"""The clutter map: the learned false-alarm density per area, and what it changes."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from trackers.clutter import (
+    CELL_SIGMAS,
+    MEMORY_SCANS,
+    PRIOR_SCANS,
+    ClutterMap,
+)
+from trackers.config import TrackerConfig
+from trackers.pipeline import TrackingPipeline
+from trackers.types import Scan
+
+PRIOR = 1e-6
+
+
+def _R(n: int, sigma: float = 10.0) -> np.ndarray:
+    return np.tile(sigma**2 * np.eye(2), (n, 1, 1))
+
+
+def test_a_sensor_not_seen_has_the_prior_everywhere() -> None:
+    m = ClutterMap()
+    z = np.array([[0.0, 0.0], [5e3, -2e3]])
+    np.testing.assert_array_equal(m.density("r", z, PRIOR), [PRIOR, PRIOR])
+    m.learn("r", np.zeros((0, 2)), np.zeros((0, 2, 2)))  # no detection yet: nothing to size
+    assert m.cell_side("r") is None
+    np.testing.assert_array_equal(m.density("r", z, PRIOR), [PRIOR, PRIOR])
+
+
+def test_worked_example_of_one_scan() -> None:
+    # sigma 10 m: cells of 200 m (area 4e4 m²); one scan with 4 false alarms in cell (0, 0)
+    m = ClutterMap()
+    clutter = np.array([[10.0, 10.0], [50.0, 150.0], [190.0, 5.0], [100.0, 100.0]])
+    m.learn("r", clutter, _R(4))
+    assert m.cell_side("r") == CELL_SIGMAS * 10.0
+    area = 200.0**2
+    alpha0 = PRIOR * area * PRIOR_SCANS
+    lam = m.density("r", np.array([[120.0, 30.0], [-50.0, 30.0]]), PRIOR)
+    # E = 1 scan
+    assert lam[0] == pytest.approx((alpha0 + 4.0) / ((PRIOR_SCANS + 1.0) * area))
+    # an empty cell after one scan: the prior's share, alpha0 / ((beta0 + 1) A)
+    assert lam[1] == pytest.approx(alpha0 / ((PRIOR_SCANS + 1.0) * area))
+
+
+def test_counts_are_forgotten_and_the_density_is_floored() -> None:
+    m = ClutterMap()
+    here = np.array([[100.0, 100.0]])
+    m.learn("r", np.repeat(here, 10, axis=0), _R(10))
+    before = m.density("r", here, PRIOR)[0]
+    for _ in range(int(MEMORY_SCANS)):
+        m.learn("r", np.zeros((0, 2)), _R(1))
+    after = m.density("r", here, PRIOR)[0]
+    # the count has decayed by about e⁻¹ while the scans counted grew a hundredfold
+    assert after < 0.05 * before
+    # far from any false alarm, long quiet: the prior's share of a full memory, λ₀ β₀ / (β₀ + M)
+    for _ in range(int(10 * MEMORY_SCANS)):
+        m.learn("r", np.zeros((0, 2)), _R(1))
+    far = m.density("r", np.array([[1e5, 1e5]]), PRIOR)[0]
+    assert far == pytest.approx(PRIOR * PRIOR_SCANS / (PRIOR_SCANS + MEMORY_SCANS), rel=1e-3)
+
+
+def test_sensors_have_their_own_maps() -> None:
+    m = ClutterMap()
+    spot = np.array([[0.0, 0.0]])
+    for _ in range(20):
+        m.learn("a", np.repeat(spot, 50, axis=0), _R(50))
+        m.learn("b", np.zeros((0, 2)), _R(1))
+    a, b = m.density("a", spot, PRIOR)[0], m.density("b", spot, PRIOR)[0]
+    assert a > 100 * PRIOR and b < 0.2 * PRIOR
+
+
+def _dense(clutter_map: bool, scans: int = 15, n_fa: int = 600):
+    """A 1.5 km square with ``n_fa`` false alarms a scan (2.7e-4 per m²) and one 100 m/s
+    target 20 km away, T = 1 s, no density stated: the confirmed tracks at the end and the
+    target's track."""
+    rng = np.random.default_rng(0)
+    cfg = TrackerConfig().merged({"track_management": {"clutter_map": clutter_map}})
+    pipe = TrackingPipeline.all_kinds(cfg)
+    x0, v = np.array([20e3, 0.0]), np.array([-100.0, 50.0])
+    for k in range(scans):
+        z = np.vstack([rng.uniform(-750, 750, (n_fa, 2)), x0 + v * k + rng.normal(0, 20, (1, 2))])
+        res = pipe.process(Scan("r", float(k), z, _R(len(z), 20.0)))
+    confirmed = res.confirmed()
+    target = [
+        t for t in confirmed if np.hypot(*(np.array(t.position) - (x0 + v * (scans - 1)))) < 100
+    ]
+    return confirmed, target
+
+
+def test_dense_local_clutter_makes_no_tracks_with_the_map() -> None:
+    """Without a stated density the configured 1e-6 per m² stood for the whole picture, 270
+    times too low in the square: most false alarms there became confirmed tracks."""
+    without, _ = _dense(False)
+    with_map, target = _dense(True)
+    assert len(without) > 100
+    assert len(target) == 1 and len(with_map) <= 3
+
+
+def test_a_stated_density_is_used_as_it_is() -> None:
+    """Batches that state their density are scored alike with the map on or off."""
+    runs = []
+    for on in (False, True):
+        rng = np.random.default_rng(3)
+        cfg = TrackerConfig().merged({"track_management": {"clutter_map": on}})
+        pipe = TrackingPipeline.all_kinds(cfg)
+        for k in range(12):
+            z = np.vstack(
+                [
+                    rng.uniform(-2e3, 2e3, (20, 2)),
+                    np.array([[100.0 + 30 * k, 0.0]]) + rng.normal(0, 10, 2),
+                ]
+            )
+            pipe.process(Scan("r", float(k), z, _R(len(z)), clutter_density=5e-6))
+        runs.append([(t.id, t.position, t.score) for t in pipe.snapshot()])
+    assert runs[0] and runs[0] == runs[1]
+
+
+def test_a_confirmed_targets_detections_are_not_counted_as_clutter() -> None:
+    """A parked target seen for 60 scans with no clutter: only the detections before its
+    track was confirmed count, not the 60 a map of every detection would hold."""
+    rng = np.random.default_rng(1)
+    pipe = TrackingPipeline(TrackerConfig())
+    every = ClutterMap()
+    for k in range(60):
+        z = np.array([[0.0, 0.0]]) + rng.normal(0, 10, (1, 2))
+        pipe.process(Scan("r", float(k), z, _R(1)))
+        every.learn("r", z, _R(1))
+    here = np.array([[0.0, 0.0]])
+    assert pipe._clutter.density("r", here, PRIOR)[0] < 0.2 * every.density("r", here, PRIOR)[0]
+    assert pipe.snapshot()[0].confirmed

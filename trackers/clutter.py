@@ -1,0 +1,157 @@
+"""A clutter map: the false-alarm density of each area, learned from a sensor's own scans.
+
+A track score weighs each detection against the false-alarm density λ_fa where it fell
+(``ln(P_D g / λ_fa)``). A batch may state one density; clutter is rarely uniform, though (sea
+clutter near a coastal radar, ground clutter near a radar site), and a newcomer states none,
+so that the configured ``track_management.clutter_density`` (1e-6 per m²) stands for the whole
+picture: ten times too low near the coast (false tracks) or a hundred times too high far out
+(a turning boat's detection loses to the clutter hypothesis and its track breaks).
+
+For scans that state no density, each sensor gets a grid of square cells of side
+:data:`CELL_SIGMAS` times the median position standard deviation of its first detections.
+Each cell counts the detections that no confirmed track took or had in its gate, with
+exponential forgetting over about :data:`MEMORY_SCANS` of the sensor's scans, and its density
+is the posterior mean of a Poisson rate with a gamma prior whose mean is the configured
+density and whose weight is :data:`PRIOR_SCANS` scans:
+
+    λ̂ = (α₀ + c) / ((β₀ + E) A),   α₀ = λ₀ A β₀,   β₀ = PRIOR_SCANS,
+
+``c`` the cell's decayed count, ``E = Σ_k γ^k`` the decayed number of scans (the same for
+every cell: a scan looks at all of them), ``A`` the cell's area and ``γ = 1 − 1/MEMORY_SCANS``.
+A new sensor's map is the configured density everywhere; it moves towards the counts as scans
+come. The prior keeps a long-quiet area at ``λ₀ β₀ / (β₀ + MEMORY_SCANS)`` (a 51st of the
+configured density) or more, so that a new false alarm there is not a near-certain target.
+A target's detections count too until its track is confirmed (a few scans), no more.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from trackers.association.gating import max_eigenvalue_2x2
+
+__all__ = ["CELL_SIGMAS", "MEMORY_SCANS", "PRIOR_SCANS", "ClutterMap"]
+
+#: A cell's side, in median position standard deviations of the sensor's detections.
+CELL_SIGMAS = 20.0
+#: The counts' memory, in scans of the sensor (forgetting factor γ = 1 − 1/MEMORY_SCANS).
+MEMORY_SCANS = 100.0
+#: The prior's weight, in scans.
+PRIOR_SCANS = 2.0
+#: A cell's side at least (m).
+MIN_CELL = 1.0
+#: Cell indices are packed into one int64 key: ix · _STRIDE + iy, each within ±_STRIDE/2.
+_STRIDE = 1 << 31
+
+_GAMMA = 1.0 - 1.0 / MEMORY_SCANS
+
+
+@dataclass
+class _Grid:
+    """One sensor's counts: ``keys`` (sorted packed cell indices), ``counts`` decayed to
+    scan ``stamps`` (the sensor's scan number when each was last brought up to date),
+    ``cell`` the side (m) and ``scans`` the sensor's scans counted."""
+
+    cell: float
+    keys: np.ndarray
+    counts: np.ndarray
+    stamps: np.ndarray
+    scans: int = 0
+
+    def exposure(self) -> float:
+        """``E = Σ_{k<n} γ^k`` over the ``n`` scans counted."""
+        return (1.0 - _GAMMA**self.scans) / (1.0 - _GAMMA)
+
+    def cells(self, z: np.ndarray) -> np.ndarray:
+        ij = np.floor(z / self.cell).astype(np.int64)
+        np.clip(ij, -(_STRIDE // 2) + 1, _STRIDE // 2 - 1, out=ij)
+        return ij[:, 0] * _STRIDE + ij[:, 1]
+
+    def decayed(self, idx: np.ndarray) -> np.ndarray:
+        """The counts of rows ``idx`` of the grid brought to now."""
+        return self.counts[idx] * _GAMMA ** (self.scans - self.stamps[idx])
+
+
+class ClutterMap:
+    """The learned clutter density of each sensor's scans (module docstring). :meth:`density`
+    reads without changing anything; :meth:`learn` records a processed scan."""
+
+    def __init__(self) -> None:
+        self._grids: dict[str, _Grid] = {}
+
+    @staticmethod
+    def _cell_side(R: np.ndarray) -> float:
+        sigma = float(np.median(np.sqrt(max_eigenvalue_2x2(R))))
+        return max(MIN_CELL, CELL_SIGMAS * sigma)
+
+    def density(self, sensor_id: str, z: np.ndarray, prior: float) -> np.ndarray:
+        """``λ̂`` (per m²) at each of the positions ``z (n, 2)`` for the sensor's next scan,
+        with the configured density ``prior``; ``prior`` everywhere for a sensor not seen."""
+        z = np.asarray(z, dtype=float).reshape(-1, 2)
+        grid = self._grids.get(sensor_id)
+        if grid is None or grid.scans == 0 or z.shape[0] == 0:
+            return np.full(z.shape[0], prior)
+        area = grid.cell * grid.cell
+        alpha0 = prior * area * PRIOR_SCANS
+        keys = grid.cells(z)
+        pos = np.searchsorted(grid.keys, keys)
+        pos_c = np.minimum(pos, max(grid.keys.size - 1, 0))
+        found = (grid.keys.size > 0) & (grid.keys[pos_c] == keys) if grid.keys.size else None
+        counts = np.zeros(z.shape[0])
+        if found is not None and found.any():
+            counts[found] = grid.decayed(pos_c[found])
+        return (alpha0 + counts) / ((PRIOR_SCANS + grid.exposure()) * area)
+
+    def learn(self, sensor_id: str, z_clutter: np.ndarray, R: np.ndarray) -> None:
+        """Record one processed scan of ``sensor_id``: ``z_clutter`` the detections that no
+        confirmed track took or had in its gate, ``R`` the covariances of all of the scan's
+        detections (to size a new sensor's cells; a sensor is not counted before it has sent
+        a detection)."""
+        grid = self._grids.get(sensor_id)
+        if grid is None:
+            if np.shape(R)[0] == 0:
+                return
+            grid = _Grid(
+                cell=self._cell_side(np.asarray(R, dtype=float)),
+                keys=np.zeros(0, dtype=np.int64),
+                counts=np.zeros(0),
+                stamps=np.zeros(0, dtype=np.int64),
+            )
+            self._grids[sensor_id] = grid
+        grid.scans += 1
+        z = np.asarray(z_clutter, dtype=float).reshape(-1, 2)
+        if z.shape[0] == 0:
+            return
+        keys, n = np.unique(grid.cells(z), return_counts=True)
+        pos = np.searchsorted(grid.keys, keys)
+        pos_c = np.minimum(pos, max(grid.keys.size - 1, 0))
+        old = (grid.keys[pos_c] == keys) if grid.keys.size else np.zeros(keys.size, dtype=bool)
+        if old.any():
+            rows = pos_c[old]
+            # this scan's detections count in full: they are of scan number ``scans``
+            grid.counts[rows] = grid.decayed(rows) + n[old]
+            grid.stamps[rows] = grid.scans
+        new = ~old
+        if new.any():
+            merged = np.concatenate([grid.keys, keys[new]])
+            order = np.argsort(merged, kind="stable")
+            grid.keys = merged[order]
+            grid.counts = np.concatenate([grid.counts, n[new].astype(float)])[order]
+            grid.stamps = np.concatenate(
+                [grid.stamps, np.full(int(new.sum()), grid.scans, dtype=np.int64)]
+            )[order]
+        # Cells whose count has decayed to nothing are dropped now and then.
+        if grid.scans % int(MEMORY_SCANS) == 0 and grid.keys.size:
+            live = grid.decayed(np.arange(grid.keys.size)) > 1e-3
+            grid.keys, grid.counts, grid.stamps = (
+                grid.keys[live],
+                grid.counts[live],
+                grid.stamps[live],
+            )
+
+    def cell_side(self, sensor_id: str) -> float | None:
+        """The side (m) of a sensor's cells, ``None`` before its first detection."""
+        grid = self._grids.get(sensor_id)
+        return None if grid is None else grid.cell
