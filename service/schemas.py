@@ -137,7 +137,6 @@ def _check_spd(cov: tuple[tuple[float, float], tuple[float, float]]) -> Any:
     return cov
 
 
-#: A 2x2 symmetric positive definite matrix given as ``[[a, b], [b, d]]``.
 def _check_area(polygon: list[tuple[float, float]]) -> Any:
     """A coverage polygon must enclose some area (shoelace formula, ``|Σ x_i y_{i+1} −
     x_{i+1} y_i| / 2 > 0``): one whose vertices lie on a line covers nothing."""
@@ -149,6 +148,7 @@ def _check_area(polygon: list[tuple[float, float]]) -> Any:
     return polygon
 
 
+#: A 2x2 symmetric positive definite matrix given as ``[[a, b], [b, d]]``.
 Cov2 = Annotated[
     tuple[tuple[Variance, Variance], tuple[Variance, Variance]], AfterValidator(_check_spd)
 ]

@@ -10,8 +10,9 @@ slowly and died young.
 
 When a scan states no coverage and more than one sensor reports, :class:`CoverageLearner`
 gives it the box that held its sensor's detections over its last :data:`LEARN_SCANS` scans
-(clutter included), grown by a tenth of its diagonal and three standard deviations of the
-largest detection noise: a sensor is taken to look where it has been seeing things. A lone
+(clutter included; empty scans count as scans), grown by a tenth of its diagonal and three
+standard deviations of the largest detection noise: a sensor is taken to look where it has
+been seeing things, and one that has seen nothing in that while to look nowhere. A lone
 sensor's scans cover everything, as before.
 """
 
@@ -42,6 +43,8 @@ LEARN_SCANS = 32
 #: deviations of the largest detection noise of those scans.
 LEARN_GROWTH = 0.1
 LEARN_SIGMAS = 3.0
+#: Point-in-polygon tests are done in blocks of at most this many points x vertices.
+CHUNK_CELLS = 1 << 18
 #: A sensor not heard for this long (s of scan time) no longer counts as one of several.
 FORGET_AFTER = 600.0
 
@@ -80,15 +83,25 @@ def polygon_distance(points: np.ndarray, polygon: np.ndarray) -> np.ndarray:
 @dataclass(frozen=True, eq=False)
 class Coverage:
     """The area a sensor looked at for one scan: the ``polygon (k, 2)`` (m, k ≥ 3) and/or the
-    disc of radius ``max_range`` (m) about ``centre (2,)``; at least one of them. ``learned``
-    says that it was inferred from the sensor's detections rather than stated."""
+    disc of radius ``max_range`` (m) about ``centre (2,)``; at least one of them, or
+    ``nowhere`` (:meth:`none`). ``learned`` says that it was inferred from the sensor's
+    detections rather than stated."""
 
     polygon: np.ndarray | None = None
     centre: np.ndarray | None = None
     max_range: float | None = None
     learned: bool = False
+    nowhere: bool = False
+
+    @staticmethod
+    def none(*, learned: bool = False) -> Coverage:
+        """A coverage that holds no point: a sensor that has seen nothing yet while others
+        report (its empty scans miss no one's tracks)."""
+        return Coverage(nowhere=True, learned=learned)
 
     def __post_init__(self) -> None:
+        if self.nowhere:
+            return
         if self.polygon is not None:
             poly = np.asarray(self.polygon, dtype=float)
             if poly.ndim != 2 or poly.shape[1] != 2 or not 3 <= poly.shape[0] <= MAX_VERTICES:
@@ -118,6 +131,8 @@ class Coverage:
         """Whether each of ``points (N, 2)`` is in view: inside every shape given or within
         ``margin`` (m, a number or one per point) of its edge."""
         p = np.asarray(points, dtype=float).reshape(-1, 2)
+        if self.nowhere:
+            return np.zeros(p.shape[0], dtype=bool)
         m = np.broadcast_to(np.asarray(margin, dtype=float), (p.shape[0],))
         inside = np.ones(p.shape[0], dtype=bool)
         if self.max_range is not None and self.centre is not None:
@@ -130,8 +145,12 @@ class Coverage:
             q, mq = p[rows], m[rows]
             near = ((q >= lo - mq[:, None]) & (q <= hi + mq[:, None])).all(axis=1)
             ok = np.zeros(rows.size, dtype=bool)
-            if near.any():
-                sub = np.flatnonzero(near)
+            # in blocks, so that points x vertices stays within CHUNK_CELLS
+            block = max(1, CHUNK_CELLS // poly.shape[0])
+            for start in range(0, int(near.size), block):
+                sub = start + np.flatnonzero(near[start : start + block])
+                if sub.size == 0:
+                    continue
                 inner = point_in_polygon(q[sub], poly)
                 if not inner.all() and (mq[sub] > 0).any():
                     out = sub[~inner]
@@ -147,7 +166,8 @@ class CoverageLearner:
     :meth:`learn` records the scan once it has been processed."""
 
     def __init__(self) -> None:
-        self._boxes: dict[str, deque[tuple[float, float, float, float, float]]] = {}
+        #: each sensor's last LEARN_SCANS scans: their detections' box and noise, or None
+        self._boxes: dict[str, deque[tuple[float, float, float, float, float] | None]] = {}
         self._heard: dict[str, float] = {}
 
     @staticmethod
@@ -166,15 +186,16 @@ class CoverageLearner:
     def coverage(self, sensor_id: str, t: float, z: np.ndarray, R: np.ndarray) -> Coverage | None:
         """The learned coverage of a scan of ``sensor_id`` at ``t`` with detections ``z``,
         ``R``: ``None`` (everywhere) while no other sensor has been heard in the last
-        :data:`FORGET_AFTER` seconds or when this one has seen nothing yet."""
+        :data:`FORGET_AFTER` seconds; :meth:`Coverage.none` when neither it nor the sensor's
+        last :data:`LEARN_SCANS` scans hold a detection."""
         if not self._several(sensor_id, t):
             return None
-        boxes = list(self._boxes.get(sensor_id, ()))
+        boxes = [b for b in self._boxes.get(sensor_id, ()) if b is not None]
         now = self._box(z, R)
         if now is not None:
             boxes.append(now)
         if not boxes:
-            return None
+            return Coverage.none(learned=True)
         b = np.array(boxes)
         lo, hi = b[:, 0:2].min(axis=0), b[:, 2:4].max(axis=0)
         grow = LEARN_GROWTH * float(np.hypot(*(hi - lo))) + LEARN_SIGMAS * float(b[:, 4].max())
@@ -183,9 +204,7 @@ class CoverageLearner:
     def learn(self, sensor_id: str, t: float, z: np.ndarray, R: np.ndarray) -> None:
         """Record a processed scan."""
         self._heard[sensor_id] = t
-        box = self._box(z, R)
-        if box is not None:
-            self._boxes.setdefault(sensor_id, deque(maxlen=LEARN_SCANS)).append(box)
+        self._boxes.setdefault(sensor_id, deque(maxlen=LEARN_SCANS)).append(self._box(z, R))
         stale = [sid for sid, last in self._heard.items() if t - last > FORGET_AFTER]
         for sid in stale:
             del self._heard[sid]

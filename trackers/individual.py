@@ -347,6 +347,7 @@ class IndividualTracker:
         claims = np.full(scan.size, -np.inf)
         masked = np.zeros(0)  # each old track's P_D / the sensor's, below 1 inside a peer's cell
         rivals = np.zeros(0, dtype=bool)  # tentative tracks that lost to a rival of their origin
+        seen = np.zeros(0, dtype=bool)  # old tracks in the scan's view
         if len(tracks):
             pd = np.full(len(tracks), pd_sensor)
             if directives.pd:
@@ -355,8 +356,11 @@ class IndividualTracker:
                     if p is not None:
                         pd[i] = p
             masked = np.minimum(pd / pd_sensor, 1.0)
-            tracks, claims = self._update_existing(pred, scan, pd, lam_fa, _in_view(pred, scan))
-            rivals = ~_best_of_each_origin(tracks)  # dropped with the deleted tracks below
+            seen = _in_view(pred, scan)
+            tracks, claims = self._update_existing(pred, scan, pd, lam_fa, seen)
+            # dropped with the deleted tracks below; rivals out of view wait for a scan that
+            # looks at them
+            rivals = ~_best_of_each_origin(tracks) & seen
 
         if config.initiation.method == "two_point":
             born, candidates = self._initiate_two_point(
@@ -381,6 +385,9 @@ class IndividualTracker:
         status = sequential_test(tracks.score, tracks.peak, tracks.confirmed, coast, tm)
         delete = status.delete
         delete[n_old:] = False  # a track is never deleted in the scan that starts or adopts it
+        idle = np.flatnonzero(~seen)  # out of view: their scores stand, only coasting ends them
+        if idle.size:
+            delete[idle] &= coast[idle] > tm.max_coast_time
         delete[:n_old] |= rivals  # tentative, so not among the deleted ids
         deleted_ids = renamed + tuple(tracks.ids[delete & tracks.confirmed].tolist())
         # Two detections say that a target is there, not how it moves: a pair whose slow and
@@ -530,11 +537,13 @@ class IndividualTracker:
         before), above it less the increment a third detection is expected to bring
         (:func:`~trackers.initiation.next_hit_allowance`): a fast target at a long revisit
         then starts, and is kept or dropped at its third scan. Every free detection becomes a
-        candidate. Returns the new tracks and the candidates to keep."""
+        candidate. A candidate out of the scan's view (with the reach of ``max_speed``) is
+        not missed by it. Returns the new tracks and the candidates to keep."""
         init, tm = config.initiation, config.track_management
         t = float(scan.time)
         cand = self._state.candidates
         cand = cand.take(t - cand.time <= init.candidate_max_age)
+        looked = _candidates_in_view(cand, scan, init.max_speed, config.gating.threshold)
         two = pair_candidates(
             cand,
             scan.z,
@@ -555,7 +564,7 @@ class IndividualTracker:
             rivals=claims,
             allowance=next_hit_allowance(
                 cand,
-                cand.time == self._state.time,
+                cand.offered == 0,
                 scan.z,
                 claims < np.inf,
                 t,
@@ -580,7 +589,9 @@ class IndividualTracker:
         )
         # The candidates go on as their missed branches while their score stays above T_d;
         # every free detection of this scan opens a new one.
-        score = _missed_branch(cand.time, cand.score, t, float(miss_increment(pd)))
+        missed = looked & (t - cand.time >= MIN_PAIR_INTERVAL)  # out of view: not missed
+        score = np.where(missed, cand.score + float(miss_increment(pd)), cand.score)
+        offered = cand.offered + missed
         keep = score > tm.delete_threshold
         idx = np.flatnonzero(claims == -np.inf)
         n = idx.size
@@ -597,6 +608,7 @@ class IndividualTracker:
             group_velocity=np.concatenate(
                 [cand.group_velocity[keep], _group_velocities(scan.z[idx], tracks, init)]
             ),
+            offered=np.concatenate([offered[keep], np.zeros(n, dtype=np.int64)]),
         )
         return born, candidates
 
@@ -707,6 +719,7 @@ class Checkpoint:
         grouped = np.isfinite(cand.group_velocity).all(axis=1)
         arrays["candidates.grouped"] = grouped
         arrays["candidates.group_velocity"] = np.where(grouped[:, None], cand.group_velocity, 0.0)
+        arrays["candidates.offered"] = cand.offered
         values = {
             "time": st.time,
             "next_id": st.next_id,
@@ -793,6 +806,11 @@ def _import(section: StateSection, config: TrackerConfig, id_prefix: str = "") -
         detection_ids=_objects(r.strings("candidates.detection_ids", k, optional=True)),
         origin=r.integers("candidates.origin", (k,), ge=0),
         group_velocity=_read_group_velocities(r, k),
+        offered=(
+            r.integers("candidates.offered", (k,), ge=0)
+            if r.has("candidates.offered")
+            else np.zeros(k, dtype=np.int64)  # a file from before coverage
+        ),
     )
     r.finish()
 
@@ -1094,6 +1112,18 @@ def _one_or_each(lam: np.ndarray) -> float | np.ndarray:
     return lam
 
 
+def _candidates_in_view(cand: Candidates, scan: Scan, max_speed: float, gamma: float) -> np.ndarray:
+    """Whether each candidate's target may be in the scan's view: its detection, grown by its
+    gate and by ``max_speed`` times the time since, reaches into the coverage; all of them
+    when the scan covers everything."""
+    if scan.coverage is None or len(cand) == 0:
+        return np.ones(len(cand), dtype=bool)
+    reach = np.sqrt(gamma * max_eigenvalue_2x2(cand.R)) + max_speed * np.maximum(
+        float(scan.time) - cand.time, 0.0
+    )
+    return scan.coverage.contains(cand.z, reach)
+
+
 def _in_view(pred: _Prediction, scan: Scan) -> np.ndarray:
     """Whether each predicted track is in the scan's coverage, or its gate reaches into it
     (``√(γ λ_max(P))`` from its edge); all of them when the scan covers everything."""
@@ -1195,13 +1225,6 @@ def _coast_rate(tracks: TrackArrays, max_coast: float, pd: float) -> np.ndarray:
     known = tracks.confirmed & (hits >= COAST_MIN_HITS)
     reach = np.where(known, COAST_REVISITS * revisit, 0.0)
     return np.minimum(1.0, max_coast / np.maximum(reach, max_coast))
-
-
-def _missed_branch(time: np.ndarray, score: np.ndarray, t: float, miss: float) -> np.ndarray:
-    """Scores of candidates or pairs that go on without a detection at ``t``: ``L + ln(1 − P_D)``
-    where the scan is at least ``MIN_PAIR_INTERVAL`` after them, else unchanged (a scan at
-    the same instant says nothing of them)."""
-    return np.where(t - time >= MIN_PAIR_INTERVAL, score + miss, score)
 
 
 def _best_of_each_origin(tracks: TrackArrays) -> np.ndarray:

@@ -96,8 +96,9 @@ class Candidates(RowArrays):
     """Detections waiting for a second one: ``z (n, 2)``, ``R (n, 2, 2)``, ``time (n,)``,
     ``score (n,)`` (the LLR of a track holding this one detection, misses included),
     ``detection_ids (n,)`` (objects), ``origin (n,)``, a number unique to each candidate
-    that the tracks it starts inherit, and ``group_velocity (n, 2)``, the velocity of the
-    fast confirmed track nearest to it when it opened (NaN: none within reach)."""
+    that the tracks it starts inherit, ``group_velocity (n, 2)``, the velocity of the
+    fast confirmed track nearest to it when it opened (NaN: none within reach), and
+    ``offered (n,)``, the scans that have looked at it since (0: it is at its first)."""
 
     z: np.ndarray
     R: np.ndarray
@@ -106,6 +107,7 @@ class Candidates(RowArrays):
     detection_ids: np.ndarray
     origin: np.ndarray
     group_velocity: np.ndarray
+    offered: np.ndarray
 
     @staticmethod
     def empty() -> Candidates:
@@ -117,6 +119,7 @@ class Candidates(RowArrays):
             detection_ids=np.zeros(0, dtype=object),
             origin=np.zeros(0, dtype=np.int64),
             group_velocity=np.zeros((0, 2)),
+            offered=np.zeros(0, dtype=np.int64),
         )
 
 

@@ -790,20 +790,13 @@ class ExtendedTracker(SavesImmutableState):
         # Each cluster's run: the candidate it continues (nearest to its prediction).
         match: list[_Candidate | None] = [None] * len(clusters)
         candidates: list[_Candidate] = []
-        for cand in state.candidates:
+        in_view = _runs_in_view(state.candidates, scan, cfg, t)
+        for cand, looked in zip(state.candidates, in_view, strict=True):
             dt = t - cand.time
-            if dt <= 0:
+            if dt <= 0 or not looked:  # a run out of view goes on
                 candidates.append(cand)
                 continue
             px, py = cand.predicted(t)
-            if (
-                scan.coverage is not None
-                and not scan.coverage.contains(
-                    np.array([[px, py]]), cfg.resolution_distance + cfg.max_speed * dt
-                ).all()
-            ):
-                candidates.append(cand)  # out of view: its run goes on
-                continue
             if not clusters:
                 continue
             reach = cfg.resolution_distance + (
@@ -1372,6 +1365,19 @@ def _ids(scan: Scan, rows: np.ndarray) -> tuple[str, ...]:
     """The ids of the detections ``rows`` that have one."""
     ids = scan.detection_ids
     return tuple(str(ids[i]) for i in rows.tolist() if ids[i] is not None)
+
+
+def _runs_in_view(
+    runs: tuple[_Candidate, ...], scan: Scan, cfg: ExtendedConfig, t: float
+) -> list[bool]:
+    """Whether each birth run's predicted centroid, grown by the resolution distance and the
+    reach of ``extended.max_speed`` since it was last seen, is in the scan's coverage (all
+    when the scan covers everything)."""
+    if scan.coverage is None or not runs:
+        return [True] * len(runs)
+    at = np.array([run.predicted(t) for run in runs], dtype=float).reshape(-1, 2)
+    reach = np.array([cfg.resolution_distance + cfg.max_speed * max(t - r.time, 0.0) for r in runs])
+    return scan.coverage.contains(at, reach).tolist()
 
 
 def _in_view(coverage: Coverage, est: ExtendedEstimate) -> bool:

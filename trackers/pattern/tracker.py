@@ -360,6 +360,11 @@ def _point_terms(
     return d2, np.log(det)
 
 
+#: The detection probability of a track out of the scan's view: its prediction, with no
+#: detection and a score that moves by no more than ln(1 − 1e-12) a point.
+_UNSEEN_PD = 1e-12
+
+
 @dataclass(frozen=True)
 class _ScanTerms:
     """What every track's update takes from one scan, computed once: its detection
@@ -598,9 +603,12 @@ class PatternTracker(SavesImmutableState):
         tree = cKDTree(scan.z) if scan.size else None
         kept: list[PatternTrack] = []
         deleted: list[str] = []
+        unseen = replace(terms, pd=_UNSEEN_PD, log_miss=math.log1p(-_UNSEEN_PD))
         for track in state.tracks:
             if scan.coverage is not None and not _in_view(track, t, scan.coverage, modes, cfg):
-                new = track  # out of this sensor's view: not looked at, nor missed
+                # out of this sensor's view: predicted to the scan, its score left alone
+                new = self._update(track, scan, None, claimed, cfg, modes, unseen)
+                new = replace(new, score=track.score, peak=track.peak)
             else:
                 new = self._update(track, scan, tree, claimed, cfg, modes, terms)
             dead = (t - new.updated > cfg.max_coast_time) or (
@@ -745,7 +753,8 @@ class PatternTracker(SavesImmutableState):
             np.array([len(q) * terms.log_miss for q in modes.patterns]),
             np.maximum(est.layer_probabilities[2], 1e-300),
         )
-        gain = float(np.logaddexp(gain, missed))
+        # (With no detection near the track the likelihood is that one already.)
+        gain = float(np.logaddexp(gain, missed)) if len(z) else missed
         best = int(np.argmax(new_est.layer_probabilities[2]))
         pairs = info.pairs[best]
         matched = np.zeros(0, dtype=np.int64) if pairs is None else np.take(rows, pairs[:, 1])
