@@ -68,6 +68,11 @@ log = logging.getLogger("service.engine")
 
 #: Sensors told at most once each that detections without a covariance get position_std.
 MAX_NO_COV_NOTES = 1024
+#: A sensor is told once that its range-rates disagree with its tracks when fewer than
+#: RANGE_RATE_FIT of the first RANGE_RATE_SAMPLE that came with confirmed tracks' detections
+#: fitted them (a wrong sign, another unit, a moving radar without its sensor_velocity).
+RANGE_RATE_SAMPLE = 30
+RANGE_RATE_FIT = 0.5
 
 
 class _Stop:
@@ -213,6 +218,8 @@ class Engine:
         self._recent = RecentBatches()
         #: sensors already told that detections without a covariance get position_std
         self._no_cov_sensors: set[str] = set()
+        #: range-rates per sensor (came, fitted) until its first RANGE_RATE_SAMPLE are judged
+        self._range_rates: dict[str, tuple[int, int]] = {}
         self._clocks = SensorClocks()  # each sensor's usual interval, for the time-jump guard
         self._stop_drain_seconds = stop_drain_seconds
         self._state = ReportState.empty()
@@ -879,6 +886,33 @@ class Engine:
             position_std,
         )
 
+    def _judge_range_rates(self, sensor: str, came: int, fitted: int) -> None:
+        """Count a sensor's range-rates that came with confirmed tracks' detections and those
+        that fitted them; once RANGE_RATE_SAMPLE have come, say whether too few fitted (once
+        per sensor, for at most MAX_NO_COV_NOTES sensors)."""
+        total = self._range_rates.get(sensor)
+        if total is None:
+            if len(self._range_rates) >= MAX_NO_COV_NOTES:
+                return
+            total = (0, 0)
+        if total[0] < 0:  # judged already
+            return
+        came, fitted = total[0] + came, total[1] + fitted
+        if came < RANGE_RATE_SAMPLE:
+            self._range_rates[sensor] = (came, fitted)
+            return
+        self._range_rates[sensor] = (-1, -1)
+        if fitted < RANGE_RATE_FIT * came:
+            log.warning(
+                "sensor %s: %d of the %d range-rates (vr) of its detections that confirmed "
+                "tracks took disagree with those tracks and were not used: vr must be the "
+                "range-rate in m/s, positive going away, seen from the batch's sensor_position "
+                "(a moving sensor also gives sensor_velocity)",
+                sensor,
+                came - fitted,
+                came,
+            )
+
     def _forget(self, item: Item, batch: DetectionBatchIn) -> None:
         """A batch accepted, then refused by the tracker, is no duplicate if it comes again."""
         if item.digest is not None:
@@ -918,6 +952,8 @@ class Engine:
             return
         if batch.cov is None and len(self._no_cov_sensors) < MAX_NO_COV_NOTES:
             self._note_missing_covariance(batch, pipeline.config.measurement.position_std)
+        if result.range_rates[0]:
+            self._judge_range_rates(batch.sensor_id, *result.range_rates)
         self._seq += 1
         self._last_wall = time.monotonic()
         self._clocks.accepted(batch.sensor_id, scan.time, self._last_wall)

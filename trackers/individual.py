@@ -348,6 +348,7 @@ class IndividualTracker:
         masked = np.zeros(0)  # each old track's P_D / the sensor's, below 1 inside a peer's cell
         rivals = np.zeros(0, dtype=bool)  # tentative tracks that lost to a rival of their origin
         seen = np.zeros(0, dtype=bool)  # old tracks in the scan's view
+        range_rates = (0, 0)
         if len(tracks):
             pd = np.full(len(tracks), pd_sensor)
             if directives.pd:
@@ -357,7 +358,7 @@ class IndividualTracker:
                         pd[i] = p
             masked = np.minimum(pd / pd_sensor, 1.0)
             seen = _in_view(pred, scan)
-            tracks, claims = self._update_existing(pred, scan, pd, lam_fa, seen)
+            tracks, claims, range_rates = self._update_existing(pred, scan, pd, lam_fa, seen)
             # dropped with the deleted tracks below; rivals out of view wait for a scan that
             # looks at them
             rivals = ~_best_of_each_origin(tracks) & seen
@@ -414,6 +415,7 @@ class IndividualTracker:
             snapshot=lambda confirmed_only: _snapshots(
                 tracks, names, t, confirmed_only=confirmed_only
             ),
+            range_rates=range_rates,
         )
         return PointProposal(
             result=result,
@@ -429,13 +431,14 @@ class IndividualTracker:
         pd: np.ndarray,
         lam_fa: np.ndarray,
         seen: np.ndarray,
-    ) -> tuple[TrackArrays, np.ndarray]:
+    ) -> tuple[TrackArrays, np.ndarray, tuple[int, int]]:
         """The tracks updated with this scan (``pd`` the detection probability of each), and
         each detection's *claim* (``lam_fa`` the false-alarm density at each detection):
         ``+inf`` where a confirmed track took it or has it in its
         gate, the updated score of the tentative track that took it, ``−inf`` where it is
         free. A track that is not ``seen`` (out of the scan's coverage) and takes no detection
-        keeps its score: it was not missed, only not looked at."""
+        keeps its score: it was not missed, only not looked at. Last, the number of range-rates
+        of the detections confirmed tracks took, and of those used (inside their gate)."""
         config, tracks = pred.config, pred.tracks
         x_pred, P_pred, c_bar, xc, Pc = pred.x_pred, pred.P_pred, pred.c_bar, pred.xc, pred.Pc
         pairs = gate(xc[:, :2], Pc[:, :2, :2], scan.z, scan.R, config.gating.threshold)
@@ -445,7 +448,7 @@ class IndividualTracker:
         xu, Pu, muu, loglik = imm_update(
             x_pred[ti], P_pred[ti], c_bar[ti], scan.z[dj], scan.R[dj], H_POSITION
         )
-        xu, Pu, muu, loglik = _with_range_rates(xu, Pu, muu, loglik, scan, dj, config)
+        xu, Pu, muu, loglik, rr = _with_range_rates(xu, Pu, muu, loglik, scan, dj, config)
         hit = hit_increment(pd[ti], loglik, lam_fa[dj])
         gain = hit - miss_increment(pd[ti])
         # Confirmed tracks choose first; tentative tracks share what they leave. A young track
@@ -462,7 +465,7 @@ class IndividualTracker:
         if found is not None:
             taken[found.detection] = True
             zero = np.zeros(found.track.size)
-            fx, fP, fmu, extra = _with_range_rates(
+            fx, fP, fmu, extra, _ = _with_range_rates(
                 found.x, found.P, found.mu, zero, scan, found.detection, config
             )
             found = replace(found, x=fx, P=fP, mu=fmu, hit=found.hit + extra)
@@ -471,6 +474,12 @@ class IndividualTracker:
             [sel, second[gnn_assign(ti[second], dj[second], gain[second], len(tracks), scan.size)]]
         )
         at, ad = ti[sel], dj[sel]
+        # The range-rates of the confirmed tracks' detections: how many came, how many fit.
+        kept = rr[sel][tracks.confirmed[at]]
+        range_rates = (
+            int(np.count_nonzero(kept != _NO_RANGE_RATE)),
+            int(np.count_nonzero(kept == _RANGE_RATE_USED)),
+        )
 
         x, P, mu = x_pred.copy(), P_pred.copy(), c_bar.copy()
         score = tracks.score + np.where(seen, miss_increment(pd), 0.0)
@@ -514,7 +523,7 @@ class IndividualTracker:
             updated=updated,
             detection_ids=det_ids,
         )
-        return new, claims
+        return new, claims, range_rates
 
     def _initiate_two_point(
         self,
@@ -1142,7 +1151,7 @@ def _with_range_rates(
     scan: Scan,
     det: np.ndarray,
     config: TrackerConfig,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """The pairs' posteriors updated again with their detections' range-rates, where the
     scan has them and a sensor position (:func:`trackers.filters.imm.imm_range_rate_update`;
     seen from a moving sensor when the scan gives its velocity ``v_s``), and their
@@ -1154,13 +1163,16 @@ def _with_range_rates(
     sensor whose Doppler is aliased or of the wrong sign loses nothing against one that sends
     none. One inside the gate of some mode updates every mode, and the mode probabilities
     with it (a turn's onset shows first in the range-rate). Nor is one used where the track is
-    within :data:`~trackers.models.measurement.MIN_RANGE` of the sensor."""
+    within :data:`~trackers.models.measurement.MIN_RANGE` of the sensor. The last array says
+    of each pair: :data:`_NO_RANGE_RATE`, :data:`_RANGE_RATE_REFUSED` (outside its gate) or
+    :data:`_RANGE_RATE_USED`."""
+    status = np.full(det.size, _NO_RANGE_RATE, dtype=np.int8)
     if scan.range_rate is None or scan.sensor_position is None or det.size == 0:
-        return x, P, mu, loglik
+        return x, P, mu, loglik, status
     rdot = np.take(scan.range_rate, det)
     have = np.flatnonzero(np.isfinite(rdot))
     if have.size == 0:
-        return x, P, mu, loglik
+        return x, P, mu, loglik, status
     sensor = np.asarray(scan.sensor_position, dtype=float)
     v_s = scan.sensor_velocity
     variance = config.measurement.range_rate_std**2
@@ -1171,9 +1183,11 @@ def _with_range_rates(
     )
     inside = (nu * nu <= config.gating.threshold_1d * S).reshape(K, M).any(axis=1)
     far = (np.hypot(xm[:, 0] - sensor[0], xm[:, 1] - sensor[1]) >= MIN_RANGE).reshape(K, M)
+    status[have[far.all(axis=1) & ~inside]] = _RANGE_RATE_REFUSED
     have = have[inside & far.all(axis=1)]
     if have.size == 0:
-        return x, P, mu, loglik
+        return x, P, mu, loglik, status
+    status[have] = _RANGE_RATE_USED
     x, P, mu, loglik = x.copy(), P.copy(), mu.copy(), loglik.copy()
     xh, Ph, muh, dll = imm_range_rate_update(
         x[have], P[have], mu[have], rdot[have], sensor, variance, v_s
@@ -1181,7 +1195,11 @@ def _with_range_rates(
     x[have], P[have], mu[have] = xh, Ph, muh
     v_max = config.initiation.max_speed + (0.0 if v_s is None else math.hypot(*v_s))
     loglik[have] += dll + math.log(2.0 * v_max)
-    return x, P, mu, loglik
+    return x, P, mu, loglik, status
+
+
+#: What became of a pair's range-rate (:func:`_with_range_rates`).
+_NO_RANGE_RATE, _RANGE_RATE_REFUSED, _RANGE_RATE_USED = 0, 1, 2
 
 
 def _group_velocities(z: np.ndarray, tracks: TrackArrays, init: InitiationConfig) -> np.ndarray:

@@ -369,6 +369,7 @@ class TrackingPipeline:
             snapshot=lambda confirmed_only: (
                 (peer_confirmed if confirmed_only else peer_all) + result.snapshot(confirmed_only)
             ),
+            range_rates=result.range_rates,
         )
 
     # -- saving and restoring --------------------------------------------------------------

@@ -170,7 +170,9 @@ class TrackSnapshot(NamedTuple):
 
 @dataclass(frozen=True, eq=False)
 class StepResult:
-    """What one tracking step returns: the ids deleted, and every live track.
+    """What one tracking step returns: the ids deleted, and every live track;
+    ``range_rates``, the range-rates that came with the detections confirmed individual tracks
+    took, and how many of them fitted their tracks and were used.
 
     ``tracks`` (tentative too) and ``confirmed()`` are built on first use from
     ``snapshot(confirmed_only)``, which reads the tracker's state as it was after this step:
@@ -182,6 +184,7 @@ class StepResult:
     sensor_id: str
     deleted: tuple[str, ...]
     snapshot: Callable[[bool], tuple[TrackSnapshot, ...]]
+    range_rates: tuple[int, int] = (0, 0)
 
     @cached_property
     def tracks(self) -> tuple[TrackSnapshot, ...]:

@@ -329,3 +329,24 @@ def test_a_batch_out_of_sequence_is_told_of_the_reorder_window(
     result = engine.submit(late, "radar-1", "test").result(timeout=10)
     assert result.error is not None and result.error["error"] == "out_of_sequence"
     assert "ingest.reorder_window (now 0 s)" in result.error["detail"]
+
+
+@pytest.mark.parametrize(("sign", "warned"), [(1.0, False), (-1.0, True)])
+def test_a_sensor_whose_range_rates_disagree_is_told_once(
+    engine: Engine, caplog: pytest.LogCaptureFixture, sign: float, warned: bool
+) -> None:
+    """A target receding at 100 m/s; the sensor sends its range-rate with the right sign, or
+    the wrong one (approaching positive): the second is said once, the first never."""
+
+    def batch(t: float) -> bytes:
+        det = {"x": 5000.0 + 100.0 * t, "y": 0.0, "vr": sign * 100.0, "cov": [[25, 0], [0, 25]]}
+        return orjson.dumps(
+            {"sensor_id": "doppler", "time": t, "detections": [det], "sensor_position": [0, 0]}
+        )
+
+    with caplog.at_level("WARNING", logger="service.engine"):
+        run_batches(engine, [batch(float(t)) for t in range(60)], key=None)
+    notes = [r.getMessage() for r in caplog.records if "range-rates (vr)" in r.getMessage()]
+    assert len(notes) == (1 if warned else 0)
+    if warned:
+        assert notes[0].startswith("sensor doppler: ") and "positive going away" in notes[0]

@@ -378,3 +378,28 @@ def test_a_track_is_confirmed_at_its_third_detection_at_the_earliest():
     (second, second_score), (third, _) = statuses
     assert second == "tentative" and second_score > threshold
     assert third == "confirmed"
+
+
+def test_the_step_counts_the_range_rates_of_confirmed_tracks() -> None:
+    """StepResult.range_rates: those that came with a confirmed track's detection, and those
+    that fitted it; a wrong-signed one comes and does not fit."""
+    counts = {}
+    for sign in (1.0, -1.0):
+        tracker = IndividualTracker(TrackerConfig())
+        total = np.zeros(2, dtype=int)
+        for k in range(30):
+            z = np.array([[5000.0 + 100.0 * k, 0.0]])
+            scan = Scan(
+                "r",
+                float(k),
+                z,
+                np.eye(2)[None] * 25.0,
+                sensor_position=np.zeros(2),
+                range_rate=np.array([sign * 100.0]),
+            )
+            total += tracker.step(scan).range_rates
+        counts[sign] = tuple(total.tolist())
+    came, fitted = counts[1.0]
+    assert came > 15 and fitted == came
+    came, fitted = counts[-1.0]
+    assert came > 15 and fitted == 0
