@@ -24,8 +24,6 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from trackers.association.gating import max_eigenvalue_2x2
-
 __all__ = [
     "LEARN_SCANS",
     "MAX_VERTICES",
@@ -175,8 +173,10 @@ class CoverageLearner:
         if z.shape[0] == 0:
             return None
         lo, hi = z.min(axis=0), z.max(axis=0)
-        sigma = math.sqrt(float(np.max(max_eigenvalue_2x2(R))))
-        return float(lo[0]), float(lo[1]), float(hi[0]), float(hi[1]), sigma
+        # the largest eigenvalue's Gershgorin bound, var + |cov| (exact for a diagonal R)
+        off = np.abs(R[:, 0, 1])
+        var = max(float((R[:, 0, 0] + off).max()), float((R[:, 1, 1] + off).max()))
+        return float(lo[0]), float(lo[1]), float(hi[0]), float(hi[1]), math.sqrt(var)
 
     def _several(self, sensor_id: str, t: float) -> bool:
         return any(

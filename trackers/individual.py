@@ -54,6 +54,7 @@ from trackers.peers import PointDirectives, PointProposal, PointTrackState, Poin
 from trackers.rows import RowArrays, sort_within_groups
 from trackers.scoring import (
     hit_increment,
+    initial_score,
     initial_score_each,
     miss_increment,
     sequential_test,
@@ -347,7 +348,7 @@ class IndividualTracker:
         claims = np.full(scan.size, -np.inf)
         masked = np.zeros(0)  # each old track's P_D / the sensor's, below 1 inside a peer's cell
         rivals = np.zeros(0, dtype=bool)  # tentative tracks that lost to a rival of their origin
-        seen = np.zeros(0, dtype=bool)  # old tracks in the scan's view
+        seen: np.ndarray | None = None  # old tracks in the scan's view (None: all)
         range_rates = (0, 0)
         if len(tracks):
             pd = np.full(len(tracks), pd_sensor)
@@ -361,7 +362,9 @@ class IndividualTracker:
             tracks, claims, range_rates = self._update_existing(pred, scan, pd, lam_fa, seen)
             # dropped with the deleted tracks below; rivals out of view wait for a scan that
             # looks at them
-            rivals = ~_best_of_each_origin(tracks) & seen
+            rivals = ~_best_of_each_origin(tracks)
+            if seen is not None:
+                rivals &= seen
 
         if config.initiation.method == "two_point":
             born, candidates = self._initiate_two_point(
@@ -386,8 +389,8 @@ class IndividualTracker:
         status = sequential_test(tracks.score, tracks.peak, tracks.confirmed, coast, tm)
         delete = status.delete
         delete[n_old:] = False  # a track is never deleted in the scan that starts or adopts it
-        idle = np.flatnonzero(~seen)  # out of view: their scores stand, only coasting ends them
-        if idle.size:
+        if seen is not None:  # out of view: their scores stand, only coasting ends them
+            idle = np.flatnonzero(~seen)
             delete[idle] &= coast[idle] > tm.max_coast_time
         delete[:n_old] |= rivals  # tentative, so not among the deleted ids
         deleted_ids = renamed + tuple(tracks.ids[delete & tracks.confirmed].tolist())
@@ -429,16 +432,17 @@ class IndividualTracker:
         pred: _Prediction,
         scan: Scan,
         pd: np.ndarray,
-        lam_fa: np.ndarray,
-        seen: np.ndarray,
+        lam_fa: float | np.ndarray,
+        seen: np.ndarray | None,
     ) -> tuple[TrackArrays, np.ndarray, tuple[int, int]]:
         """The tracks updated with this scan (``pd`` the detection probability of each), and
-        each detection's *claim* (``lam_fa`` the false-alarm density at each detection):
+        each detection's *claim* (``lam_fa`` the false-alarm density, one or one a detection):
         ``+inf`` where a confirmed track took it or has it in its
         gate, the updated score of the tentative track that took it, ``−inf`` where it is
-        free. A track that is not ``seen`` (out of the scan's coverage) and takes no detection
-        keeps its score: it was not missed, only not looked at. Last, the number of range-rates
-        of the detections confirmed tracks took, and of those used (inside their gate)."""
+        free. A track that is not ``seen`` (out of the scan's coverage; ``None``: all are) and
+        takes no detection keeps its score: it was not missed, only not looked at. Last, the
+        number of range-rates of the detections confirmed tracks took, and of those used
+        (inside their gate)."""
         config, tracks = pred.config, pred.tracks
         x_pred, P_pred, c_bar, xc, Pc = pred.x_pred, pred.P_pred, pred.c_bar, pred.xc, pred.Pc
         pairs = gate(xc[:, :2], Pc[:, :2, :2], scan.z, scan.R, config.gating.threshold)
@@ -449,7 +453,7 @@ class IndividualTracker:
             x_pred[ti], P_pred[ti], c_bar[ti], scan.z[dj], scan.R[dj], H_POSITION
         )
         xu, Pu, muu, loglik, rr = _with_range_rates(xu, Pu, muu, loglik, scan, dj, config)
-        hit = hit_increment(pd[ti], loglik, lam_fa[dj])
+        hit = hit_increment(pd[ti], loglik, _at(lam_fa, dj))
         gain = hit - miss_increment(pd[ti])
         # Confirmed tracks choose first; tentative tracks share what they leave. A young track
         # with a wide velocity gate would otherwise take a confirmed target's detections.
@@ -475,14 +479,17 @@ class IndividualTracker:
         )
         at, ad = ti[sel], dj[sel]
         # The range-rates of the confirmed tracks' detections: how many came, how many fit.
-        kept = rr[sel][tracks.confirmed[at]]
-        range_rates = (
-            int(np.count_nonzero(kept != _NO_RANGE_RATE)),
-            int(np.count_nonzero(kept == _RANGE_RATE_USED)),
-        )
+        range_rates = (0, 0)
+        if scan.range_rate is not None and at.size:
+            kept = rr[sel][tracks.confirmed[at]]
+            range_rates = (
+                int(np.count_nonzero(kept != _NO_RANGE_RATE)),
+                int(np.count_nonzero(kept == _RANGE_RATE_USED)),
+            )
 
         x, P, mu = x_pred.copy(), P_pred.copy(), c_bar.copy()
-        score = tracks.score + np.where(seen, miss_increment(pd), 0.0)
+        missed = miss_increment(pd)
+        score = tracks.score + (missed if seen is None else np.where(seen, missed, 0.0))
         xu, Pu, muu, hit = xu[sel], Pu[sel], muu[sel], hit[sel]
         if found is not None:
             at, ad = np.concatenate([at, found.track]), np.concatenate([ad, found.detection])
@@ -531,7 +538,7 @@ class IndividualTracker:
         claims: np.ndarray,
         config: TrackerConfig,
         pd: float,
-        lam_fa: np.ndarray,
+        lam_fa: float | np.ndarray,
         counters: _Counters,
         tracks: TrackArrays,
     ) -> tuple[TrackArrays, Candidates]:
@@ -566,7 +573,7 @@ class IndividualTracker:
             gamma=config.gating.threshold,
             max_pairs=init.max_pairs_per_candidate,
             pd=pd,
-            clutter_density=_one_or_each(lam_fa),
+            clutter_density=lam_fa,
             min_score=tm.delete_threshold,
             group_fraction=init.group_fraction,
             group_velocity_std=init.group_velocity_std,
@@ -578,7 +585,7 @@ class IndividualTracker:
                 claims < np.inf,
                 t,
                 pd=pd,
-                clutter_density=float(np.median(lam_fa)) if lam_fa.size else 1.0,
+                clutter_density=_typical(lam_fa),
                 max_speed=init.max_speed,
                 slow_fraction=init.slow_target_fraction,
                 floor=tm.delete_threshold,
@@ -598,7 +605,9 @@ class IndividualTracker:
         )
         # The candidates go on as their missed branches while their score stays above T_d;
         # every free detection of this scan opens a new one.
-        missed = looked & (t - cand.time >= MIN_PAIR_INTERVAL)  # out of view: not missed
+        missed = t - cand.time >= MIN_PAIR_INTERVAL  # at the same instant: not missed
+        if looked is not None:
+            missed &= looked  # nor out of view
         score = np.where(missed, cand.score + float(miss_increment(pd)), cand.score)
         offered = cand.offered + missed
         keep = score > tm.delete_threshold
@@ -610,7 +619,7 @@ class IndividualTracker:
             R=np.concatenate([cand.R[keep], scan.R[idx]]),
             time=np.concatenate([cand.time[keep], np.full(n, t)]),
             score=np.concatenate(
-                [score[keep], initial_score_each(tm.new_target_density, lam_fa[idx])]
+                [score[keep], _initial_scores(tm.new_target_density, lam_fa, idx)]
             ),
             detection_ids=np.concatenate([cand.detection_ids[keep], fresh_ids]),
             origin=np.concatenate([cand.origin[keep], counters.origins(n)]),
@@ -626,7 +635,7 @@ class IndividualTracker:
         scan: Scan,
         free: np.ndarray,
         config: TrackerConfig,
-        lam_fa: np.ndarray,
+        lam_fa: float | np.ndarray,
         counters: _Counters,
     ) -> TrackArrays:
         """A tentative track at each free detection: position z with covariance R, zero
@@ -638,7 +647,7 @@ class IndividualTracker:
         P = np.zeros((n, 4, 4))
         P[:, :2, :2] = scan.R[idx]
         P[:, 2, 2] = P[:, 3, 3] = config.initiation.velocity_std**2
-        L1 = initial_score_each(config.track_management.new_target_density, lam_fa[idx])
+        L1 = _initial_scores(config.track_management.new_target_density, lam_fa, idx)
         return _new_tracks(
             config,
             scan,
@@ -1067,14 +1076,14 @@ def _manoeuvre_found(
     assigned: np.ndarray,
     gated: np.ndarray,
     pd: np.ndarray,
-    lam_fa: np.ndarray,
-    seen: np.ndarray,
+    lam_fa: float | np.ndarray,
+    seen: np.ndarray | None,
 ) -> ManoeuvreMatch | None:
     """:func:`manoeuvre_search` for the confirmed tracks in view (``seen``) not in
     ``assigned`` over the detections not in ``gated`` (those in a confirmed track's gate), its
     indices turned into the scan's tracks and detections."""
     config, tracks = pred.config, pred.tracks
-    lost = tracks.confirmed & seen
+    lost = tracks.confirmed.copy() if seen is None else tracks.confirmed & seen
     lost[assigned] = False
     lost = np.flatnonzero(lost)
     free = np.ones(scan.size, dtype=bool)
@@ -1092,7 +1101,7 @@ def _manoeuvre_found(
         scan.z[free],
         scan.R[free],
         pd[lost],
-        lam_fa[free],
+        _at(lam_fa, free),
         a_max=config.gating.manoeuvre_acceleration,
         omega_max=config.gating.manoeuvre_turn_rate,
         straight_sojourn=config.motion.sojourn_times[0],
@@ -1103,42 +1112,56 @@ def _manoeuvre_found(
     return replace(found, track=lost[found.track], detection=free[found.detection])
 
 
-def _clutter_densities(scan: Scan, configured: float) -> np.ndarray:
-    """λ_fa at each of the scan's detections: the density the batch states, else the clutter
-    map's (:mod:`trackers.clutter`), else the configured one."""
+def _clutter_densities(scan: Scan, configured: float) -> float | np.ndarray:
+    """λ_fa: the density the batch states, else the clutter map's at each detection
+    (:mod:`trackers.clutter`), else the configured one."""
     if scan.clutter_density is not None:
-        return np.full(scan.size, float(scan.clutter_density))
+        return float(scan.clutter_density)
     if scan.clutter_map is not None:
         return scan.clutter_map
-    return np.full(scan.size, configured)
+    return configured
 
 
-def _one_or_each(lam: np.ndarray) -> float | np.ndarray:
-    """One density when all detections share it (the usual case: the arithmetic of one
-    number), else the array."""
-    if lam.size == 0 or bool((lam == lam[0]).all()):
-        return float(lam[0]) if lam.size else 1.0
-    return lam
+def _at(lam: float | np.ndarray, rows: np.ndarray) -> float | np.ndarray:
+    """λ_fa of the detections ``rows``: the one number, or theirs."""
+    return lam if isinstance(lam, float) else np.take(lam, rows)
 
 
-def _candidates_in_view(cand: Candidates, scan: Scan, max_speed: float, gamma: float) -> np.ndarray:
+def _typical(lam: float | np.ndarray) -> float:
+    """One λ_fa for a scan: the one number, or the median of the detections'."""
+    if isinstance(lam, float):
+        return lam
+    return float(np.median(lam)) if lam.size else 1.0
+
+
+def _initial_scores(
+    new_target_density: float, lam: float | np.ndarray, rows: np.ndarray
+) -> np.ndarray:
+    """``L(1) = ln(λ_nt / λ_fa)`` of new candidates or tracks at the detections ``rows``."""
+    if isinstance(lam, float):
+        return np.full(rows.size, initial_score(new_target_density, lam))
+    return initial_score_each(new_target_density, np.take(lam, rows))
+
+
+def _candidates_in_view(
+    cand: Candidates, scan: Scan, max_speed: float, gamma: float
+) -> np.ndarray | None:
     """Whether each candidate's target may be in the scan's view: its detection, grown by its
     gate and by ``max_speed`` times the time since, reaches into the coverage; all of them
-    when the scan covers everything."""
-    if scan.coverage is None or len(cand) == 0:
-        return np.ones(len(cand), dtype=bool)
+    ``None`` (all) when the scan covers everything."""
+    if scan.coverage is None:
+        return None
     reach = np.sqrt(gamma * max_eigenvalue_2x2(cand.R)) + max_speed * np.maximum(
         float(scan.time) - cand.time, 0.0
     )
     return scan.coverage.contains(cand.z, reach)
 
 
-def _in_view(pred: _Prediction, scan: Scan) -> np.ndarray:
+def _in_view(pred: _Prediction, scan: Scan) -> np.ndarray | None:
     """Whether each predicted track is in the scan's coverage, or its gate reaches into it
-    (``√(γ λ_max(P))`` from its edge); all of them when the scan covers everything."""
-    n = len(pred.tracks)
+    (``√(γ λ_max(P))`` from its edge); ``None`` (all) when the scan covers everything."""
     if scan.coverage is None:
-        return np.ones(n, dtype=bool)
+        return None
     reach = np.sqrt(pred.config.gating.threshold * max_eigenvalue_2x2(pred.Pc[:, :2, :2]))
     return scan.coverage.contains(pred.xc[:, :2], reach)
 
