@@ -26,13 +26,14 @@ A target's detections count too until its track is confirmed (a few scans), no m
 
 from __future__ import annotations
 
+from collections import OrderedDict
 from dataclasses import dataclass
 
 import numpy as np
 
 from trackers.association.gating import max_eigenvalue_2x2
 
-__all__ = ["CELL_SIGMAS", "MEMORY_SCANS", "PRIOR_SCANS", "ClutterMap"]
+__all__ = ["CELL_SIGMAS", "MAX_CELLS", "MAX_SENSORS", "MEMORY_SCANS", "PRIOR_SCANS", "ClutterMap"]
 
 #: A cell's side, in median position standard deviations of the sensor's detections.
 CELL_SIGMAS = 20.0
@@ -42,6 +43,12 @@ MEMORY_SCANS = 100.0
 PRIOR_SCANS = 2.0
 #: A cell's side at least (m).
 MIN_CELL = 1.0
+#: The most sensors with a map (beyond, the least recently heard is forgotten), and the most
+#: cells a sensor's map keeps (beyond, those with the least left of their count go): a
+#: sender of many sensor ids or of detections strewn over a continent cannot grow the maps
+#: past about MAX_SENSORS x MAX_CELLS x 24 bytes (100 MB).
+MAX_SENSORS = 256
+MAX_CELLS = 1 << 14
 #: Cell indices are packed into one int64 key: ix · _STRIDE + iy, each within ±_STRIDE/2.
 _STRIDE = 1 << 31
 
@@ -79,7 +86,7 @@ class ClutterMap:
     reads without changing anything; :meth:`learn` records a processed scan."""
 
     def __init__(self) -> None:
-        self._grids: dict[str, _Grid] = {}
+        self._grids: OrderedDict[str, _Grid] = OrderedDict()  # least recently heard first
 
     @staticmethod
     def _cell_side(R: np.ndarray) -> float:
@@ -120,6 +127,9 @@ class ClutterMap:
                 stamps=np.zeros(0, dtype=np.int64),
             )
             self._grids[sensor_id] = grid
+            while len(self._grids) > MAX_SENSORS:
+                self._grids.popitem(last=False)
+        self._grids.move_to_end(sensor_id)
         grid.scans += 1
         z = np.asarray(z_clutter, dtype=float).reshape(-1, 2)
         if z.shape[0] == 0:
@@ -142,8 +152,18 @@ class ClutterMap:
             grid.stamps = np.concatenate(
                 [grid.stamps, np.full(int(new.sum()), grid.scans, dtype=np.int64)]
             )[order]
-        # Cells whose count has decayed to nothing are dropped now and then.
-        if grid.scans % int(MEMORY_SCANS) == 0 and grid.keys.size:
+        # Cells whose count has decayed to nothing are dropped now and then, and the weakest
+        # when there are too many.
+        if grid.keys.size > MAX_CELLS:
+            left = grid.decayed(np.arange(grid.keys.size))
+            live = left >= np.partition(left, -MAX_CELLS)[-MAX_CELLS]
+            live &= np.cumsum(live) <= MAX_CELLS
+            grid.keys, grid.counts, grid.stamps = (
+                grid.keys[live],
+                grid.counts[live],
+                grid.stamps[live],
+            )
+        elif grid.scans % int(MEMORY_SCANS) == 0 and grid.keys.size:
             live = grid.decayed(np.arange(grid.keys.size)) > 1e-3
             grid.keys, grid.counts, grid.stamps = (
                 grid.keys[live],

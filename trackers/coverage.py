@@ -19,13 +19,14 @@ sensor's scans cover everything, as before.
 from __future__ import annotations
 
 import math
-from collections import deque
+from collections import OrderedDict, deque
 from dataclasses import dataclass
 
 import numpy as np
 
 __all__ = [
     "LEARN_SCANS",
+    "MAX_SENSORS",
     "MAX_VERTICES",
     "Coverage",
     "CoverageLearner",
@@ -43,6 +44,8 @@ LEARN_GROWTH = 0.1
 LEARN_SIGMAS = 3.0
 #: Point-in-polygon tests are done in blocks of at most this many points x vertices.
 CHUNK_CELLS = 1 << 18
+#: The most sensors remembered; beyond, the least recently heard is forgotten.
+MAX_SENSORS = 256
 #: A sensor not heard for this long (s of scan time) no longer counts as one of several.
 FORGET_AFTER = 600.0
 
@@ -166,7 +169,8 @@ class CoverageLearner:
     def __init__(self) -> None:
         #: each sensor's last LEARN_SCANS scans: their detections' box and noise, or None
         self._boxes: dict[str, deque[tuple[float, float, float, float, float] | None]] = {}
-        self._heard: dict[str, float] = {}
+        #: when each sensor was last heard, least recently first
+        self._heard: OrderedDict[str, float] = OrderedDict()
 
     @staticmethod
     def _box(z: np.ndarray, R: np.ndarray) -> tuple[float, float, float, float, float] | None:
@@ -204,7 +208,11 @@ class CoverageLearner:
     def learn(self, sensor_id: str, t: float, z: np.ndarray, R: np.ndarray) -> None:
         """Record a processed scan."""
         self._heard[sensor_id] = t
+        self._heard.move_to_end(sensor_id)
         self._boxes.setdefault(sensor_id, deque(maxlen=LEARN_SCANS)).append(self._box(z, R))
+        while len(self._heard) > MAX_SENSORS:
+            gone, _ = self._heard.popitem(last=False)
+            self._boxes.pop(gone, None)
         stale = [sid for sid, last in self._heard.items() if t - last > FORGET_AFTER]
         for sid in stale:
             del self._heard[sid]

@@ -132,3 +132,23 @@ def test_a_confirmed_targets_detections_are_not_counted_as_clutter() -> None:
     here = np.array([[0.0, 0.0]])
     assert pipe._clutter.density("r", here, PRIOR)[0] < 0.2 * every.density("r", here, PRIOR)[0]
     assert pipe.snapshot()[0].confirmed
+
+
+def test_the_maps_are_bounded_whatever_is_sent() -> None:
+    """Many sensor ids, and detections strewn far apart: at most MAX_SENSORS maps of at most
+    MAX_CELLS cells each (the most recently heard sensors, the strongest cells kept)."""
+    from trackers.clutter import MAX_CELLS, MAX_SENSORS
+
+    m = ClutterMap()
+    rng = np.random.default_rng(0)
+    for i in range(MAX_SENSORS + 20):
+        m.learn(f"s{i}", rng.uniform(-1e3, 1e3, (2, 2)), _R(2))
+    assert len(m._grids) == MAX_SENSORS and m.cell_side("s0") is None
+    assert m.cell_side(f"s{MAX_SENSORS + 19}") is not None
+    strong = np.array([[5.0, 5.0]])
+    m.learn("wide", np.repeat(strong, 50, axis=0), _R(50))
+    for _ in range(3):
+        m.learn("wide", rng.uniform(-1e8, 1e8, (MAX_CELLS // 2 + 100, 2)), _R(1))
+    grid = m._grids["wide"]
+    assert grid.keys.size <= MAX_CELLS and np.all(np.diff(grid.keys) > 0)
+    assert m.density("wide", strong, PRIOR)[0] > 10 * PRIOR  # the strong cell was kept

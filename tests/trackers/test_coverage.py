@@ -317,3 +317,13 @@ def test_a_formation_out_of_view_keeps_its_score() -> None:
             assert fb == pytest.approx(fa)
             checked += 1
     assert checked > 10
+
+
+def test_the_learner_remembers_a_bounded_number_of_sensors() -> None:
+    from trackers.coverage import MAX_SENSORS
+
+    learner = CoverageLearner()
+    for i in range(MAX_SENSORS + 10):
+        learner.learn(f"s{i}", float(i), np.zeros((1, 2)), _R2(1, 1.0))
+    assert len(learner._heard) == MAX_SENSORS and len(learner._boxes) == MAX_SENSORS
+    assert "s0" not in learner._heard and f"s{MAX_SENSORS + 9}" in learner._heard
