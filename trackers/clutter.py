@@ -43,10 +43,13 @@ MEMORY_SCANS = 100.0
 PRIOR_SCANS = 2.0
 #: A cell's side at least (m).
 MIN_CELL = 1.0
+#: A batch whose detections would set cells more than this many times finer or coarser than
+#: a sensor's cells starts its map afresh.
+RESIZE = 4.0
 #: The most sensors with a map (beyond, the least recently heard is forgotten), and the most
-#: cells a sensor's map keeps (beyond, those with the least left of their count go): a
-#: sender of many sensor ids or of detections strewn over a continent cannot grow the maps
-#: past about MAX_SENSORS x MAX_CELLS x 24 bytes (100 MB).
+#: cells a sensor's map keeps (beyond, its cells are made twice as wide, their counts
+#: summed): a sender of many sensor ids or of detections strewn over a continent cannot grow
+#: the maps past about MAX_SENSORS x MAX_CELLS x 24 bytes (100 MB).
 MAX_SENSORS = 256
 MAX_CELLS = 1 << 14
 #: Cell indices are packed into one int64 key: ix · _STRIDE + iy, each within ±_STRIDE/2.
@@ -59,13 +62,16 @@ _GAMMA = 1.0 - 1.0 / MEMORY_SCANS
 class _Grid:
     """One sensor's counts: ``keys`` (sorted packed cell indices), ``counts`` decayed to
     scan ``stamps`` (the sensor's scan number when each was last brought up to date),
-    ``cell`` the side (m) and ``scans`` the sensor's scans counted."""
+    ``cell`` the side (m), ``scans`` the sensor's scans counted and ``base`` the side its
+    detections set."""
 
     cell: float
     keys: np.ndarray
     counts: np.ndarray
     stamps: np.ndarray
     scans: int = 0
+    #: the side the sensor's detections set (``cell`` grows from it when cells are merged)
+    base: float = 0.0
 
     def exposure(self) -> float:
         """``E = Σ_{k<n} γ^k`` over the ``n`` scans counted."""
@@ -79,6 +85,26 @@ class _Grid:
     def decayed(self, idx: np.ndarray) -> np.ndarray:
         """The counts of rows ``idx`` of the grid brought to now."""
         return self.counts[idx] * _GAMMA ** (self.scans - self.stamps[idx])
+
+
+def _coarsen(grid: _Grid) -> None:
+    """The grid with cells twice as wide: each new cell's count is the sum of the four it
+    covers, brought to now."""
+    counts = grid.decayed(np.arange(grid.keys.size))
+    iy = _unpack_iy(grid.keys)
+    ix = (grid.keys - iy) // _STRIDE
+    keys = np.floor_divide(ix, 2) * _STRIDE + np.floor_divide(iy, 2)
+    merged, inverse = np.unique(keys, return_inverse=True)
+    grid.keys = merged
+    grid.counts = np.bincount(inverse, weights=counts, minlength=merged.size)
+    grid.stamps = np.full(merged.size, grid.scans, dtype=np.int64)
+    grid.cell *= 2.0
+
+
+def _unpack_iy(keys: np.ndarray) -> np.ndarray:
+    """The iy of packed keys ``ix · _STRIDE + iy`` with ``|iy| < _STRIDE / 2``."""
+    iy = np.mod(keys, _STRIDE)
+    return np.where(iy >= _STRIDE // 2, iy - _STRIDE, iy)
 
 
 class ClutterMap:
@@ -117,14 +143,21 @@ class ClutterMap:
         detections (to size a new sensor's cells; a sensor is not counted before it has sent
         a detection)."""
         grid = self._grids.get(sensor_id)
+        if np.shape(R)[0]:
+            side = self._cell_side(np.asarray(R, dtype=float))
+            # a sensor's first detections set its cells; detections a lot finer or coarser
+            # than those (another mode, a first batch of a different kind) start it afresh
+            if grid is not None and not grid.base / RESIZE <= side <= grid.base * RESIZE:
+                grid = None
         if grid is None:
             if np.shape(R)[0] == 0:
                 return
             grid = _Grid(
-                cell=self._cell_side(np.asarray(R, dtype=float)),
+                cell=side,
                 keys=np.zeros(0, dtype=np.int64),
                 counts=np.zeros(0),
                 stamps=np.zeros(0, dtype=np.int64),
+                base=side,
             )
             self._grids[sensor_id] = grid
             while len(self._grids) > MAX_SENSORS:
@@ -152,18 +185,11 @@ class ClutterMap:
             grid.stamps = np.concatenate(
                 [grid.stamps, np.full(int(new.sum()), grid.scans, dtype=np.int64)]
             )[order]
-        # Cells whose count has decayed to nothing are dropped now and then, and the weakest
-        # when there are too many.
-        if grid.keys.size > MAX_CELLS:
-            left = grid.decayed(np.arange(grid.keys.size))
-            live = left >= np.partition(left, -MAX_CELLS)[-MAX_CELLS]
-            live &= np.cumsum(live) <= MAX_CELLS
-            grid.keys, grid.counts, grid.stamps = (
-                grid.keys[live],
-                grid.counts[live],
-                grid.stamps[live],
-            )
-        elif grid.scans % int(MEMORY_SCANS) == 0 and grid.keys.size:
+        # Too many cells: four become one (their counts summed), as often as needed. Cells
+        # whose count has decayed to nothing are dropped now and then.
+        while grid.keys.size > MAX_CELLS:
+            _coarsen(grid)
+        if grid.scans % int(MEMORY_SCANS) == 0 and grid.keys.size:
             live = grid.decayed(np.arange(grid.keys.size)) > 1e-3
             grid.keys, grid.counts, grid.stamps = (
                 grid.keys[live],

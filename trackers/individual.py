@@ -350,6 +350,7 @@ class IndividualTracker:
         rivals = np.zeros(0, dtype=bool)  # tentative tracks that lost to a rival of their origin
         seen: np.ndarray | None = None  # old tracks in the scan's view (None: all)
         range_rates = (0, 0)
+        established = np.zeros(scan.size, dtype=bool)
         if len(tracks):
             pd = np.full(len(tracks), pd_sensor)
             if directives.pd:
@@ -359,7 +360,9 @@ class IndividualTracker:
                         pd[i] = p
             masked = np.minimum(pd / pd_sensor, 1.0)
             seen = _in_view(pred, scan)
-            tracks, claims, range_rates = self._update_existing(pred, scan, pd, lam_fa, seen)
+            tracks, claims, range_rates, established = self._update_existing(
+                pred, scan, pd, lam_fa, seen
+            )
             # dropped with the deleted tracks below; rivals out of view wait for a scan that
             # looks at them
             rivals = ~_best_of_each_origin(tracks)
@@ -424,7 +427,7 @@ class IndividualTracker:
             result=result,
             released=released,
             state=(self._version, state),
-            clutter=claims < np.inf,
+            clutter=(claims < np.inf) & ~established,
         )
 
     def _update_existing(
@@ -434,7 +437,7 @@ class IndividualTracker:
         pd: np.ndarray,
         lam_fa: float | np.ndarray,
         seen: np.ndarray | None,
-    ) -> tuple[TrackArrays, np.ndarray, tuple[int, int]]:
+    ) -> tuple[TrackArrays, np.ndarray, tuple[int, int], np.ndarray]:
         """The tracks updated with this scan (``pd`` the detection probability of each), and
         each detection's *claim* (``lam_fa`` the false-alarm density, one or one a detection):
         ``+inf`` where a confirmed track took it or has it in its
@@ -442,7 +445,8 @@ class IndividualTracker:
         free. A track that is not ``seen`` (out of the scan's coverage; ``None``: all are) and
         takes no detection keeps its score: it was not missed, only not looked at. Last, the
         number of range-rates of the detections confirmed tracks took, and of those used
-        (inside their gate)."""
+        (inside their gate), and the detections taken by tracks of at least
+        :data:`ESTABLISHED_HITS` detections."""
         config, tracks = pred.config, pred.tracks
         x_pred, P_pred, c_bar, xc, Pc = pred.x_pred, pred.P_pred, pred.c_bar, pred.xc, pred.Pc
         pairs = gate(xc[:, :2], Pc[:, :2, :2], scan.z, scan.R, config.gating.threshold)
@@ -514,6 +518,10 @@ class IndividualTracker:
         # same target than a new one, and starting a track on it would make a duplicate.
         claims = np.full(scan.size, -np.inf)
         claims[ad] = score[at]
+        # Detections that tracks of three or more detections took: a target's, whatever the
+        # track's status (a group of young targets is not clutter).
+        established = np.zeros(scan.size, dtype=bool)
+        established[ad[hits[at] >= ESTABLISHED_HITS]] = True
         claims[dj[tracks.confirmed[ti]]] = np.inf  # a confirmed track's detections included
         if found is not None:
             claims[found.detection] = np.inf
@@ -530,7 +538,7 @@ class IndividualTracker:
             updated=updated,
             detection_ids=det_ids,
         )
-        return new, claims, range_rates
+        return new, claims, range_rates, established
 
     def _initiate_two_point(
         self,
@@ -1110,6 +1118,11 @@ def _manoeuvre_found(
     if found is None:
         return None
     return replace(found, track=lost[found.track], detection=free[found.detection])
+
+
+#: A track holding this many detections is taken to be a target's: the clutter map does not
+#: count the detections it takes, tentative or not.
+ESTABLISHED_HITS = 3
 
 
 def _clutter_densities(scan: Scan, configured: float) -> float | np.ndarray:

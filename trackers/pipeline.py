@@ -301,7 +301,14 @@ class TrackingPipeline:
         self._hand_in.clear()
         self._hand_over.clear()
         self._coverage.learn(scan.sensor_id, scan.time, scan.z, scan.R)
-        if scan.clutter_density is None and self.point.config.track_management.clutter_map:
+        # A batch with a coverage of its own (a sector of a revolution) or none detection (a
+        # heartbeat) would count as a look at every cell: the map learns from the others.
+        if (
+            scan.clutter_density is None
+            and scan.coverage is None
+            and scan.size
+            and self.point.config.track_management.clutter_map
+        ):
             mask = point.clutter
             clutter = rows if mask is None else rows[np.asarray(mask, dtype=bool)]
             self._clutter.learn(scan.sensor_id, scan.z.take(clutter, axis=0), scan.R)

@@ -147,8 +147,38 @@ def test_the_maps_are_bounded_whatever_is_sent() -> None:
     assert m.cell_side(f"s{MAX_SENSORS + 19}") is not None
     strong = np.array([[5.0, 5.0]])
     m.learn("wide", np.repeat(strong, 50, axis=0), _R(50))
+    side = m.cell_side("wide")
+    n = MAX_CELLS // 2 + 100
     for _ in range(3):
-        m.learn("wide", rng.uniform(-1e8, 1e8, (MAX_CELLS // 2 + 100, 2)), _R(1))
+        m.learn("wide", rng.uniform(-1e6, 1e6, (n, 2)), _R(n))
     grid = m._grids["wide"]
+    # four cells became one as often as needed, nothing of the counts lost
     assert grid.keys.size <= MAX_CELLS and np.all(np.diff(grid.keys) > 0)
-    assert m.density("wide", strong, PRIOR)[0] > 10 * PRIOR  # the strong cell was kept
+    assert grid.cell > side and np.log2(grid.cell / side) % 1 == 0
+    total = grid.decayed(np.arange(grid.keys.size)).sum()
+    gamma = 1.0 - 1.0 / MEMORY_SCANS
+    assert total == pytest.approx(50 * gamma**3 + n * (gamma**2 + gamma + 1))
+
+
+def test_sector_and_empty_batches_teach_the_map_nothing() -> None:
+    """A batch with its own coverage (a sector) or no detection would count as a look at every
+    cell and thin the density out: the pipeline learns only from the others."""
+    from trackers.coverage import Coverage
+
+    pipe = TrackingPipeline(TrackerConfig())
+    rng = np.random.default_rng(4)
+    sector = Coverage(polygon=np.array([[0.0, 0.0], [5e3, 0.0], [5e3, 5e3]]))
+    for k in range(10):
+        z = rng.uniform(0, 5e3, (30, 2))
+        pipe.process(Scan("r", 2.0 * k, z, _R(30)))
+        pipe.process(Scan("r", 2.0 * k + 0.5, np.zeros((0, 2)), _R(0)))
+        pipe.process(Scan("r", 2.0 * k + 1.0, z[:3], _R(3), coverage=sector))
+    assert pipe._clutter._grids["r"].scans == 10
+
+
+def test_a_much_finer_first_batch_does_not_set_the_cells_for_good() -> None:
+    m = ClutterMap()
+    m.learn("r", np.zeros((1, 2)), _R(1, 0.05))  # one detection of 5 cm: 1 m cells
+    assert m.cell_side("r") == 1.0
+    m.learn("r", np.zeros((5, 2)), _R(5, 30.0))  # the sensor's own: 600 m, afresh
+    assert m.cell_side("r") == CELL_SIGMAS * 30.0 and m._grids["r"].scans == 1
