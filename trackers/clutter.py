@@ -9,7 +9,8 @@ picture: ten times too low near the coast (false tracks) or a hundred times too 
 
 For scans that state no density, each sensor gets a grid of square cells of side
 :data:`CELL_SIGMAS` times the median position standard deviation of its first detections.
-Each cell counts the detections that no confirmed track took or had in its gate, with
+Each cell counts the detections that no confirmed track took or had in its gate and no track
+of three or more detections took (what the pipeline passes to :meth:`ClutterMap.learn`), with
 exponential forgetting over about :data:`MEMORY_SCANS` of the sensor's scans, and its density
 is the posterior mean of a Poisson rate with a gamma prior whose mean is the configured
 density and whose weight is :data:`PRIOR_SCANS` scans:
@@ -21,7 +22,7 @@ every cell: a scan looks at all of them), ``A`` the cell's area and ``γ = 1 −
 A new sensor's map is the configured density everywhere; it moves towards the counts as scans
 come. The prior keeps a long-quiet area at ``λ₀ β₀ / (β₀ + MEMORY_SCANS)`` (a 51st of the
 configured density) or more, so that a new false alarm there is not a near-certain target.
-A target's detections count too until its track is confirmed (a few scans), no more.
+A target's detections count too until its track holds three of them, no more.
 """
 
 from __future__ import annotations
@@ -82,6 +83,14 @@ class _Grid:
         np.clip(ij, -(_STRIDE // 2) + 1, _STRIDE // 2 - 1, out=ij)
         return ij[:, 0] * _STRIDE + ij[:, 1]
 
+    def find(self, keys: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """For packed cell ``keys``, the row of each in the grid (clipped into it) and whether
+        the grid has that cell."""
+        rows = np.minimum(np.searchsorted(self.keys, keys), max(self.keys.size - 1, 0))
+        if self.keys.size == 0:
+            return rows, np.zeros(keys.size, dtype=bool)
+        return rows, self.keys[rows] == keys
+
     def decayed(self, idx: np.ndarray) -> np.ndarray:
         """The counts of rows ``idx`` of the grid brought to now."""
         return self.counts[idx] * _GAMMA ** (self.scans - self.stamps[idx])
@@ -128,18 +137,15 @@ class ClutterMap:
             return np.full(z.shape[0], prior)
         area = grid.cell * grid.cell
         alpha0 = prior * area * PRIOR_SCANS
-        keys = grid.cells(z)
-        pos = np.searchsorted(grid.keys, keys)
-        pos_c = np.minimum(pos, max(grid.keys.size - 1, 0))
-        found = (grid.keys.size > 0) & (grid.keys[pos_c] == keys) if grid.keys.size else None
+        rows, found = grid.find(grid.cells(z))
         counts = np.zeros(z.shape[0])
-        if found is not None and found.any():
-            counts[found] = grid.decayed(pos_c[found])
+        if found.any():
+            counts[found] = grid.decayed(rows[found])
         return (alpha0 + counts) / ((PRIOR_SCANS + grid.exposure()) * area)
 
     def learn(self, sensor_id: str, z_clutter: np.ndarray, R: np.ndarray) -> None:
-        """Record one processed scan of ``sensor_id``: ``z_clutter`` the detections that no
-        confirmed track took or had in its gate, ``R`` the covariances of all of the scan's
+        """Record one processed scan of ``sensor_id``: ``z_clutter`` the detections taken for
+        clutter (module docstring), ``R`` the covariances of all of the scan's
         detections (to size a new sensor's cells; a sensor is not counted before it has sent
         a detection)."""
         grid = self._grids.get(sensor_id)
@@ -168,11 +174,9 @@ class ClutterMap:
         if z.shape[0] == 0:
             return
         keys, n = np.unique(grid.cells(z), return_counts=True)
-        pos = np.searchsorted(grid.keys, keys)
-        pos_c = np.minimum(pos, max(grid.keys.size - 1, 0))
-        old = (grid.keys[pos_c] == keys) if grid.keys.size else np.zeros(keys.size, dtype=bool)
+        rows, old = grid.find(keys)
         if old.any():
-            rows = pos_c[old]
+            rows = rows[old]
             # this scan's detections count in full: they are of scan number ``scans``
             grid.counts[rows] = grid.decayed(rows) + n[old]
             grid.stamps[rows] = grid.scans

@@ -294,7 +294,8 @@ class PointProposal:
     """A point tracker's proposed step: ``result`` is what the step returns once committed,
     ``released`` the states of the tracks the peers took; ``state`` is private to the tracker.
     ``clutter``, when the tracker says, marks the scan's detections that no confirmed track
-    took or had in its gate (what the pipeline's clutter map counts)."""
+    took or had in its gate and no track of three or more detections took (what the
+    pipeline's clutter map counts)."""
 
     result: StepResult
     released: tuple[PointTrackState, ...]

@@ -292,23 +292,19 @@ class TrackingPipeline:
             hand_in=tuple(self._hand_in.values()),
         )
 
-    def _committed(self, scan: Scan, point: PointProposal, rows: np.ndarray) -> None:
+    def _committed(self, scan: Scan, point: PointProposal, rows: np.ndarray, mapped: bool) -> None:
         """After every tracker has taken ``scan``: its time is the last, the hand-overs are
-        done, and its detections say where its sensor looks and, those of ``rows`` (the point
-        tracker's, the peers' claims left out) that the point tracker marks as ``clutter``
-        (no confirmed track took or gated them), how dense its false alarms are."""
+        done, and its detections say where its sensor looks and, when the scan was ``mapped``
+        (scored with the clutter map), those of ``rows`` (the point tracker's, the peers'
+        claims left out) that the point tracker marks as ``clutter``, how dense its false
+        alarms are."""
         self._last_time = scan.time
         self._hand_in.clear()
         self._hand_over.clear()
         self._coverage.learn(scan.sensor_id, scan.time, scan.z, scan.R)
         # A batch with a coverage of its own (a sector of a revolution) or none detection (a
         # heartbeat) would count as a look at every cell: the map learns from the others.
-        if (
-            scan.clutter_density is None
-            and scan.coverage is None
-            and scan.size
-            and self.point.config.track_management.clutter_map
-        ):
+        if mapped and scan.coverage is None and scan.size:
             mask = point.clutter
             clutter = rows if mask is None else rows[np.asarray(mask, dtype=bool)]
             self._clutter.learn(scan.sensor_id, scan.z.take(clutter, axis=0), scan.R)
@@ -324,7 +320,8 @@ class TrackingPipeline:
             if coverage is not None:
                 learned["coverage"] = coverage
         tm = self.point.config.track_management
-        if scan.clutter_density is None and tm.clutter_map:
+        mapped = scan.clutter_density is None and tm.clutter_map
+        if mapped:
             learned["clutter_map"] = self._clutter.density(
                 scan.sensor_id, scan.z, tm.clutter_density
             )
@@ -333,7 +330,7 @@ class TrackingPipeline:
         if not self.peers:
             proposal = self.point.propose(scan, self._with_hand_over(PointDirectives()))
             self.point.commit(proposal)
-            self._committed(given, proposal, np.arange(scan.size))
+            self._committed(given, proposal, np.arange(scan.size), mapped)
             return proposal.result
         view = self.point.predicted(scan.time)
         # The peers see the scan one after another, each without the detections claimed
@@ -364,7 +361,7 @@ class TrackingPipeline:
         for peer, prop in zip(self.peers, proposals, strict=True):
             peer.commit(prop)
         self.point.commit(point)
-        self._committed(given, point, free)
+        self._committed(given, point, free, mapped)
         peer_all = tuple(t for prop in proposals for t in prop.tracks)
         peer_confirmed = tuple(t for t in peer_all if t.confirmed)
         deleted = tuple(d for prop in proposals for d in prop.deleted)
