@@ -26,7 +26,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass, fields, replace
+from dataclasses import dataclass, field, fields, replace
 
 import numpy as np
 
@@ -35,6 +35,12 @@ from trackers.association.gnn import gnn_assign
 from trackers.association.manoeuvre import ManoeuvreMatch, manoeuvre_search
 from trackers.association.spatial import pairs_within
 from trackers.config import InitiationConfig, TrackerConfig
+from trackers.detection_rate import (
+    LOOK_MIN_HITS,
+    MIN_MISSES,
+    DetectionRates,
+    coast_revisits,
+)
 from trackers.filters.imm import (
     imm_combine,
     imm_predict,
@@ -78,11 +84,10 @@ KIND = "individual"
 #: whatever its score (tracks handed in by peers keep their status).
 MIN_CONFIRM_HITS = 3
 
-#: A track may coast for at least this many revisits of its sensor, however short
-#: ``max_coast_time``: a GMTI revisiting every 10 s misses a vehicle twice in a row now and then
-#: (1 % a scan at P_D 0.9), and ``max_coast_time`` 10 s deleted it at the second miss.
-COAST_REVISITS = 2.5
-#: ... once it is confirmed and has had this many detections.
+#: A confirmed track with this many detections may coast through m* − 1 missed revisits of its
+#: sensor, however short ``max_coast_time`` (:mod:`trackers.detection_rate`): a GMTI revisiting
+#: every 10 s misses a vehicle twice in a row now and then (1 % a scan at P_D 0.9), and
+#: ``max_coast_time`` 10 s deleted it at the second miss.
 COAST_MIN_HITS = 5
 
 
@@ -183,6 +188,8 @@ class _State:
     time: float | None
     next_id: int
     next_origin: int
+    #: each sensor's detection probability as its tracks show it (not saved: relearned)
+    rates: DetectionRates = field(default_factory=DetectionRates)
 
 
 class _Counters:
@@ -289,6 +296,12 @@ class IndividualTracker:
         self._prediction = pred
         return pred
 
+    def detection_probability(self, sensor_id: str) -> float:
+        """``sensor_id``'s detection probability as its established tracks showed it
+        (:mod:`trackers.detection_rate`; the configured ``pd`` for a sensor not heard yet). It
+        sets how long a track may coast on that sensor's scans that state no ``pd``."""
+        return self._state.rates.estimate(sensor_id, self.config.track_management.pd)
+
     def predicted(self, time: float) -> PointTrackView:
         """The live tracks predicted to ``time`` (no earlier than the last scan), read-only."""
         pred = self._predict(float(time))
@@ -331,6 +344,11 @@ class IndividualTracker:
         tm = config.track_management
         pd_sensor = tm.pd if scan.pd is None else float(scan.pd)
         lam_fa = _clutter_densities(scan, tm.clutter_density)
+        rates = self._state.rates
+        last_look = rates.of(scan.sensor_id)
+        pd_coast = rates.estimate(scan.sensor_id, tm.pd) if scan.pd is None else pd_sensor
+        reach = coast_revisits(pd_coast, tm.p_true_delete)
+        longer = reach > MIN_MISSES - 0.5  # a sensor that misses more than P_D 0.9 does
         counters = _Counters(self._state.next_id, self._state.next_origin, self.id_prefix)
 
         released: tuple[PointTrackState, ...] = ()
@@ -351,6 +369,7 @@ class IndividualTracker:
         seen: np.ndarray | None = None  # old tracks in the scan's view (None: all)
         range_rates = (0, 0)
         established = np.zeros(scan.size, dtype=bool)
+        looks = detected = 0
         if len(tracks):
             pd = np.full(len(tracks), pd_sensor)
             if directives.pd:
@@ -360,9 +379,21 @@ class IndividualTracker:
                         pd[i] = p
             masked = np.minimum(pd / pd_sensor, 1.0)
             seen = _in_view(pred, scan)
+            # The manoeuvre search reaches as far as a track may coast at P_D 0.9 (a target
+            # missed more often is looked for in its gate only: the search's reach grows as
+            # τ², and a track lost for long found clutter with it and flew off).
+            searching = None
+            if longer:
+                searching = (t - pred.tracks.updated) * _coast_rate(
+                    pred.tracks, tm.max_coast_time, pd_coast, MIN_MISSES - 0.5
+                ) <= tm.max_coast_time
             tracks, claims, range_rates, established = self._update_existing(
-                pred, scan, pd, lam_fa, seen
+                pred, scan, pd, lam_fa, seen, searching
             )
+            if last_look is not None:
+                look = _looks(pred.tracks, seen, masked, last_look.time)
+                looks = int(look.sum())
+                detected = int((look & (tracks.updated == t)).sum())
             # dropped with the deleted tracks below; rivals out of view wait for a scan that
             # looks at them
             rivals = ~_best_of_each_origin(tracks)
@@ -384,8 +415,18 @@ class IndividualTracker:
         # A track whose detection probability a peer lowered (a vehicle inside a convoy's
         # resolution cell) is expected to go undetected for longer: its coasting time counts
         # at the rate P_D / P_D,sensor while it is there. A track of a slow sensor may coast
-        # through two of its missed revisits (:func:`_coast_rate`). The lower rate counts.
-        rate = _coast_rate(tracks, tm.max_coast_time, pd_sensor)
+        # through m* − 1 of its missed revisits, m* from the sensor's detection probability,
+        # stated or learned (:mod:`trackers.detection_rate`). The lower rate counts.
+        # Past MIN_MISSES, only a track whose gate is clear of clutter coasts on.
+        revisits: float | np.ndarray = reach
+        if n_old and longer:
+            lam = lam_fa if isinstance(lam_fa, float) else tm.clutter_density
+            if isinstance(lam_fa, np.ndarray) and lam_fa.size:
+                lam = float(np.median(lam_fa))
+            crowded = _crowded_gates(pred.Pc, scan, lam, config.gating.threshold)
+            revisits = np.full(len(tracks), reach)
+            revisits[:n_old][crowded] = MIN_MISSES - 0.5
+        rate = _coast_rate(tracks, tm.max_coast_time, pd_coast, revisits)
         if masked.size and (masked < 1.0).any():
             rate[: masked.size] = np.minimum(rate[: masked.size], masked)
         coast = (t - tracks.updated) * rate
@@ -412,6 +453,7 @@ class IndividualTracker:
             time=t,
             next_id=counters.next_id,
             next_origin=counters.next_origin,
+            rates=rates.learned(scan.sensor_id, t, looks, detected),
         )
         names = tuple(m.name for m in models)
         result = StepResult(
@@ -437,6 +479,7 @@ class IndividualTracker:
         pd: np.ndarray,
         lam_fa: float | np.ndarray,
         seen: np.ndarray | None,
+        searching: np.ndarray | None,
     ) -> tuple[TrackArrays, np.ndarray, tuple[int, int], np.ndarray]:
         """The tracks updated with this scan (``pd`` the detection probability of each), and
         each detection's *claim* (``lam_fa`` the false-alarm density, one or one a detection):
@@ -469,7 +512,7 @@ class IndividualTracker:
         taken[dj[sel]] = True
         # A confirmed track with nothing in its gate looks again, within the reach of a
         # manoeuvre since its last update, among the detections no confirmed track gates.
-        found = _manoeuvre_found(pred, scan, ti[sel], dj[first], pd, lam_fa, seen)
+        found = _manoeuvre_found(pred, scan, ti[sel], dj[first], pd, lam_fa, seen, searching)
         if found is not None:
             taken[found.detection] = True
             zero = np.zeros(found.track.size)
@@ -1086,12 +1129,16 @@ def _manoeuvre_found(
     pd: np.ndarray,
     lam_fa: float | np.ndarray,
     seen: np.ndarray | None,
+    searching: np.ndarray | None,
 ) -> ManoeuvreMatch | None:
-    """:func:`manoeuvre_search` for the confirmed tracks in view (``seen``) not in
-    ``assigned`` over the detections not in ``gated`` (those in a confirmed track's gate), its
-    indices turned into the scan's tracks and detections."""
+    """:func:`manoeuvre_search` for the confirmed tracks in view (``seen``) and
+    ``searching`` (``None``: all), not in ``assigned``, over the detections not in ``gated``
+    (those in a confirmed track's gate), its indices turned into the scan's tracks and
+    detections."""
     config, tracks = pred.config, pred.tracks
-    lost = tracks.confirmed.copy() if seen is None else tracks.confirmed & seen
+    lost = tracks.confirmed.copy() if searching is None else tracks.confirmed & searching
+    if seen is not None:
+        lost &= seen
     lost[assigned] = False
     lost = np.flatnonzero(lost)
     free = np.ones(scan.size, dtype=bool)
@@ -1264,21 +1311,57 @@ def _group_velocities(z: np.ndarray, tracks: TrackArrays, init: InitiationConfig
     return out
 
 
-def _coast_rate(tracks: TrackArrays, max_coast: float, pd: float) -> np.ndarray:
+def _coast_rate(
+    tracks: TrackArrays, max_coast: float, pd: float, revisits: float | np.ndarray
+) -> np.ndarray:
     """The rate at which each track's coasting time counts against ``max_coast``:
 
-        min(1, T_coast / (COAST_REVISITS · T̂)),   T̂ = P_D (t_updated − t_created) / (hits − 1),
+        min(1, T_coast / (revisits · T̂)),   T̂ = P_D (t_updated − t_created) / (hits − 1),
 
     ``T̂`` its sensor's revisit as the track saw it (its mean interval between detections,
     of which a fraction ``P_D`` are detected), for confirmed tracks of at least
     :data:`COAST_MIN_HITS` detections (a false track's few hits say little of a revisit); 1
-    for the others. It is below 1 only where the revisit is long (over 4 s with the
-    defaults), and then lets a track coast through two missed revisits."""
+    for the others. It is below 1 only where ``revisits`` revisits take longer than
+    ``max_coast`` (a revisit over 4 s with the defaults and ``P_D`` 0.9, ``revisits`` 2.5),
+    and then lets a track coast through that many revisits."""
     hits = tracks.hits
     revisit = pd * (tracks.updated - tracks.created) / np.maximum(hits - 1, 1)
     known = tracks.confirmed & (hits >= COAST_MIN_HITS)
-    reach = np.where(known, COAST_REVISITS * revisit, 0.0)
+    reach = np.where(known, revisits * revisit, 0.0)
     return np.minimum(1.0, max_coast / np.maximum(reach, max_coast))
+
+
+#: A track coasts past MIN_MISSES − ½ revisits only while fewer false alarms than this are
+#: expected in its gate (:mod:`trackers.detection_rate`).
+GATE_CLUTTER = 0.1
+
+
+def _crowded_gates(Pc: np.ndarray, scan: Scan, lam: float, gamma: float) -> np.ndarray:
+    """Mask of the tracks whose gate expects at least :data:`GATE_CLUTTER` false alarms:
+
+        λ̄ V ≥ GATE_CLUTTER,   V = π γ √det(P_pos + R̄),
+
+    with ``P_pos`` a track's predicted position covariance, ``R̄`` the scan's median detection
+    covariance and ``λ̄`` = ``lam`` its (median) false-alarm density."""
+    S = Pc[:, :2, :2]
+    if scan.size:
+        S = S + np.median(scan.R, axis=0)
+    det = S[:, 0, 0] * S[:, 1, 1] - S[:, 0, 1] ** 2
+    return lam * np.pi * gamma * np.sqrt(np.maximum(det, 0.0)) >= GATE_CLUTTER
+
+
+def _looks(
+    tracks: TrackArrays, seen: np.ndarray | None, masked: np.ndarray, last_scan: float
+) -> np.ndarray:
+    """Mask of the tracks (before this scan's update) that count as a look of the sensor at
+    an established target (:mod:`trackers.detection_rate`): confirmed, with at least
+    :data:`~trackers.detection_rate.LOOK_MIN_HITS` detections, in view, outside every peer's
+    resolution cell, and detected at or since the sensor's previous scan at ``last_scan``."""
+    look = tracks.confirmed & (tracks.hits >= LOOK_MIN_HITS) & (tracks.updated >= last_scan)
+    look &= masked >= 1.0
+    if seen is not None:
+        look &= seen
+    return look
 
 
 def _best_of_each_origin(tracks: TrackArrays) -> np.ndarray:

@@ -109,10 +109,10 @@ def test_confirmed_track_is_deleted_after_drop_from_peak_and_reported():
 def test_max_coast_time_deletes():
     tr = IndividualTracker(config(pd=0.2, clutter_density=1e-6, max_coast_time=3.5))
     for k in range(10):
-        res = tr.step(scan_at(k, [0.0, 0.0]))
+        res = tr.step(scan_at(k, [0.0, 0.0], pd=0.2))
     assert res.confirmed()
     for k in range(10, 15):
-        res = tr.step(scan_at(k, np.zeros((0, 2))))
+        res = tr.step(scan_at(k, np.zeros((0, 2)), pd=0.2))
         if res.deleted:
             break
     # last update at 9; misses cost only ln(0.8), so coasting decides: 13 − 9 = 4 > 3.5
@@ -140,6 +140,54 @@ def test_a_slow_sensors_track_coasts_through_two_missed_revisits(revisit, pd):
     assert deleted == [tid]
     # T = 10 s: through two missed revisits (20 s), not three; T = 1 s: 10 s, as before
     assert at == (30.0 if revisit == 10.0 else 11.0)
+
+
+def _coasted_misses(pd=None, lam=1e-9, scans=80):
+    """A target every 5 s seen by a sensor with P_D 0.7 for ``scans`` scans (never 3 misses
+    in a row), then never again: the number of misses in a row its track coasted through,
+    and the tracker."""
+    tr = IndividualTracker(TrackerConfig())
+    rng = np.random.default_rng(4)
+    truth = lambda k: np.array([1000.0 + 50.0 * k, 500.0])  # noqa: E731
+    seen = rng.random(scans) < 0.7
+    seen[:4] = seen[-1] = True
+    for k in range(2, scans):
+        seen[k] |= not (seen[k - 1] or seen[k - 2])
+    for k in range(scans):
+        z = truth(k) + rng.normal(0.0, SIGMA, 2) if seen[k] else np.zeros((0, 2))
+        res = tr.step(scan_at(5.0 * k, z, pd=pd, lam=lam))
+    last = scans - 1
+    (tid,) = [t.id for t in res.confirmed()]
+    for k in range(scans, scans + 20):
+        if tid in tr.step(scan_at(5.0 * k, np.zeros((0, 2)), pd=pd, lam=lam)).deleted:
+            return k - last - 1, tr
+    raise AssertionError("never deleted")
+
+
+def test_a_track_coasts_longer_on_a_sensor_that_misses_more():
+    """A sensor that sees its targets 7 times in 10 at a 5 s revisit: the rule of 2.5 revisits
+    deleted a track at its third miss in a row, which happens to a true target at 2.7 % of its
+    scans. The sensor's P_D is learned from its tracks, and the track coasts until its misses
+    in a row have probability β (1e-3) or less; a scan that states its P_D is taken at its
+    word."""
+    coasted, tr = _coasted_misses()
+    assert 0.65 < tr.detection_probability("r1") < 0.8
+    assert 4 <= coasted <= 5
+    assert _coasted_misses(pd=0.7)[0] == 5  # (0.3)^6 < 1e-3: deleted at the sixth
+    # stated 0.9: 2.5 revisits as before, the revisit read from the track's detections as
+    # 0.9 / 0.7 of the true one (a stated P_D that is too high): deleted at the fourth
+    assert _coasted_misses(pd=0.9)[0] == 3
+
+
+def test_a_track_whose_gate_is_full_of_clutter_does_not_coast_longer():
+    """Past the third miss a track's gate is wide; in clutter it takes a false alarm and flies
+    off with it. So only a track whose gate expects under 0.1 false alarms coasts on."""
+    assert _coasted_misses(pd=0.7, lam=1e-5)[0] == 2
+
+
+def test_a_sensor_never_heard_has_the_configured_detection_probability():
+    tr = IndividualTracker(TrackerConfig().merged({"track_management": {"pd": 0.85}}))
+    assert tr.detection_probability("radar") == 0.85
 
 
 def test_track_ids_are_unique_and_never_reused():
