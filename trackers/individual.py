@@ -437,11 +437,19 @@ class IndividualTracker:
             idle = np.flatnonzero(~seen)
             delete[idle] &= coast[idle] > tm.max_coast_time
         delete[:n_old] |= rivals  # tentative, so not among the deleted ids
-        deleted_ids = renamed + tuple(tracks.ids[delete & tracks.confirmed].tolist())
         # Two detections say that a target is there, not how it moves: a pair whose slow and
         # fast readings both fit (200 m in 1 s under 40 m noise) may hold the wrong one, and
         # confirmed, would be lost at the next detection and coast on as a second track.
         newly = status.confirmed & ~tracks.confirmed & (tracks.hits >= MIN_CONFIRM_HITS)
+        # A track of 3 detections or more on a target whose confirmed track lost it (it
+        # sped up, braked, turned out of the gate) is that track again, confirmed or not yet
+        # (a positive score: likelier a target than not): the old id goes on with it.
+        young = ~tracks.confirmed & (tracks.hits >= MIN_CONFIRM_HITS) & ~delete
+        young &= newly | (tracks.score >= 0.0)
+        if young.any():
+            tracks, young, delete = _relinked(tracks, young, delete, t, config)
+            newly &= ~delete
+        deleted_ids = renamed + tuple(tracks.ids[delete & tracks.confirmed].tolist())
         tracks = replace(tracks, confirmed=newly | (tracks.confirmed & ~delete))
         tracks = _frozen(tracks.take(~delete))
 
@@ -1362,6 +1370,84 @@ def _looks(
     if seen is not None:
         look &= seen
     return look
+
+
+def _relinked(
+    tracks: TrackArrays, young: np.ndarray, delete: np.ndarray, t: float, config: TrackerConfig
+) -> tuple[TrackArrays, np.ndarray, np.ndarray]:
+    """Young tracks (``young``: tentative ones of at least 3 detections that are confirmed
+    at this scan or have a positive score) that continue a confirmed track which lost their
+    target, merged into it: the old track takes the young one's state, detections and score
+    (if higher) and goes on under its id, confirmed; the young one is dropped. Returns the
+    tracks, ``young`` and ``delete`` (the old track kept, the young one dropped).
+
+    A confirmed track *o* last updated at ``t_o`` (not at this scan, and no later than the
+    first detection of the young track *n*) is continued by *n* when a constant acceleration
+    ``a = (v_n − v_o) / Δt``, ``Δt = t − t_o``, takes *o*'s state at ``t_o`` to *n*'s at
+    ``t``, within the gate and no harder than ``gating.manoeuvre_acceleration``:
+
+        e = p_n − p̂_o − ½ (v_n − v_o) Δt,
+        S = P_n,pp + P̂_o,pp + (Δt/2)² (P_n,vv + P̂_o,vv),
+        eᵀ S⁻¹ e ≤ γ,   |a| ≤ a_max,
+
+    with ``p̂_o = p_o + v_o Δt`` the old track's prediction to ``t`` (its covariance grown by
+    the coasting). The likeliest pairs are merged first, each track at most once. A target
+    that sped up from a hover, braked hard or turned out of its track's gate was otherwise
+    seen by a second track while the first coasted on beside it, then deleted: the target
+    changed id. A young track that is not confirmed yet must be likelier a target than not
+    (score ≥ 0): in dense clutter three false alarms in a row fit a coasting track's wide
+    prediction now and then."""
+    new = np.flatnonzero(young)
+    old = np.flatnonzero(tracks.confirmed & (tracks.updated < t))
+    if old.size == 0:
+        return tracks, young, delete
+    xn, Pn = tracks.x_comb[new], tracks.P_comb[new]
+    xo, Po = tracks.x_comb[old], tracks.P_comb[old]
+    dt = t - tracks.updated[old]
+    dv = xn[:, None, 2:4] - xo[None, :, 2:4]
+    e = xn[:, None, 0:2] - xo[None, :, 0:2] - 0.5 * dv * dt[None, :, None]
+    h2 = (0.5 * dt)[None, :, None, None] ** 2
+    S = (
+        Pn[:, None, 0:2, 0:2]
+        + Po[None, :, 0:2, 0:2]
+        + h2 * (Pn[:, None, 2:4, 2:4] + Po[None, :, 2:4, 2:4])
+    )
+    a, b, c = S[..., 0, 0], S[..., 0, 1], S[..., 1, 1]
+    det = a * c - b * b
+    ex, ey = e[..., 0], e[..., 1]
+    m = (c * ex * ex - 2.0 * b * ex * ey + a * ey * ey) / np.maximum(det, 1e-300)
+    fits = (
+        (tracks.updated[old][None, :] <= tracks.created[new][:, None])
+        & (det > 0.0)
+        & (m <= config.gating.threshold)
+        & (np.hypot(dv[..., 0], dv[..., 1]) <= config.gating.manoeuvre_acceleration * dt)
+    )
+    if not fits.any():
+        return tracks, young, delete
+    ni, oj = np.nonzero(fits)
+    order = np.argsort(m[ni, oj], kind="stable")
+    pairs: list[tuple[int, int]] = []
+    used_n: set[int] = set()
+    used_o: set[int] = set()
+    for i, j in zip(ni[order].tolist(), oj[order].tolist(), strict=True):
+        if i not in used_n and j not in used_o:
+            used_n.add(i)
+            used_o.add(j)
+            pairs.append((int(new[i]), int(old[j])))
+    rn = np.array([p[0] for p in pairs])
+    ro = np.array([p[1] for p in pairs])
+    fields = {k: getattr(tracks, k).copy() for k in tracks.__dataclass_fields__}
+    for k in ("x", "P", "mu", "x_comb", "P_comb", "updated", "detection_ids"):
+        fields[k][ro] = fields[k][rn]
+    fields["hits"][ro] += fields["hits"][rn]
+    fields["score"][ro] = np.maximum(fields["score"][ro], fields["score"][rn])
+    fields["peak"][ro] = np.maximum(fields["peak"][ro], fields["score"][ro])
+    young = young.copy()
+    delete = delete.copy()
+    young[rn] = False
+    delete[rn] = True
+    delete[ro] = False
+    return _frozen(TrackArrays(**fields)), young, delete
 
 
 def _best_of_each_origin(tracks: TrackArrays) -> np.ndarray:

@@ -190,6 +190,46 @@ def test_a_sensor_never_heard_has_the_configured_detection_probability():
     assert tr.detection_probability("radar") == 0.85
 
 
+def _pulling_away(seed, speed=20.0, *, appears=None):
+    """A target at rest for 20 scans (T = 2 s) that then moves at ``speed`` along x (a
+    helicopter leaving its hover, a car pulling away), or, with ``appears``, vanishes there
+    while another target appears at ``appears`` moving along y. The confirmed ids near a
+    target from scan 10 on, and the ids reported deleted."""
+    tr = IndividualTracker(TrackerConfig())
+    rng = np.random.default_rng(seed)
+    pos = np.array([1000.0, 0.0])
+    ids, deleted = set(), []
+    for k in range(40):
+        if k >= 20:
+            if appears is None:
+                pos = pos + np.array([speed * 2.0, 0.0])
+            else:
+                pos = np.asarray(appears) + np.array([0.0, speed * 2.0 * (k - 20)])
+        res = tr.step(scan_at(2.0 * k, pos + rng.normal(0.0, 10.0, 2), lam=1e-9, sigma=10.0))
+        deleted += list(res.deleted)
+        if k >= 10:
+            near = [c.id for c in res.confirmed() if np.hypot(*np.subtract(c.position, pos)) < 100]
+            ids |= set(near)
+    return ids, deleted
+
+
+@pytest.mark.parametrize("seed", [0, 3])
+def test_a_track_that_lost_its_target_goes_on_with_the_new_track_that_found_it(seed):
+    """The target sets off from rest: its track, sure it stands still, loses it and coasts,
+    while its detections start a new track (before: T2 confirmed, T1 deleted). A young track
+    that a constant acceleration joins to the old track's last state is that track again:
+    the old id goes on, nothing is reported deleted and no second id is confirmed."""
+    ids, deleted = _pulling_away(seed)
+    assert ids == {"T1"} and deleted == []
+
+
+def test_a_new_target_away_from_a_lost_one_keeps_its_own_id():
+    """A target that vanishes and another that appears 1.5 km away, moving across it: no
+    constant acceleration within the gate joins them, so the new one gets its own id."""
+    ids, deleted = _pulling_away(0, appears=(2500.0, 0.0))
+    assert ids == {"T1", "T2"} and deleted == ["T1"]
+
+
 def test_track_ids_are_unique_and_never_reused():
     tr = IndividualTracker(config(pd=0.9, clutter_density=1e-6))
     seen = []
