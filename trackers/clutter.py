@@ -12,29 +12,48 @@ For scans that state no density, each sensor gets a grid of square cells of side
 Each cell counts the detections that no confirmed track took or had in its gate and no track
 of three or more detections took (what the pipeline passes to :meth:`ClutterMap.learn`), with
 exponential forgetting over about :data:`MEMORY_SCANS` of the sensor's scans, and its density
-is the posterior mean of a Poisson rate with a gamma prior whose mean is the configured
-density and whose weight is :data:`PRIOR_SCANS` scans:
+is the posterior mean of a Poisson rate with a gamma prior whose weight is :data:`PRIOR_SCANS`
+scans and whose mean λ₀ is the scene's: the density of all the sensor's counts ``C`` over the
+box ``A_s`` that those of its last :data:`SCENE_SCANS` scans span (grown by a cell), the
+configured density ``λ_c`` weighing :data:`SCENE_PRIOR_SCANS` scans of it, times
+:data:`SCENE_MARGIN` and no more than ``λ_c``:
 
-    λ̂ = (α₀ + c) / ((β₀ + E) A),   α₀ = λ₀ A β₀,   β₀ = PRIOR_SCANS,
+    λ₀ = min(λ_c, m (λ_c A_s β_s + C) / ((β_s + E) A_s)),
+    λ̂ = max((α₀ + c) / ((β₀ + E) A), λ_c β₀ / (β₀ + MEMORY_SCANS)),
+    α₀ = λ₀ A β₀,   β₀ = PRIOR_SCANS,
 
 ``c`` the cell's decayed count, ``E = Σ_k γ^k`` the decayed number of scans (the same for
 every cell: a scan looks at all of them), ``A`` the cell's area and ``γ = 1 − 1/MEMORY_SCANS``.
 A new sensor's map is the configured density everywhere; it moves towards the counts as scans
-come. The prior keeps a long-quiet area at ``λ₀ β₀ / (β₀ + MEMORY_SCANS)`` (a 51st of the
-configured density) or more, so that a new false alarm there is not a near-certain target.
+come. The scene's density is known after a scan or two where a cell's own counts take some
+50 scans: a newcomer's sparse clutter (70 times below the configured density) no longer
+delays the first tracks. The margin and the ceiling keep the cells' prior on the safe side
+where clutter is dense (there the configured density stands, as before). The floor keeps a
+long-quiet area at a 51st of the configured density or more, so that a new false alarm
+there is not a near-certain target.
 A target's detections count too until its track holds three of them, no more.
 """
 
 from __future__ import annotations
 
-from collections import OrderedDict
-from dataclasses import dataclass
+from collections import OrderedDict, deque
+from dataclasses import dataclass, field
 
 import numpy as np
 
 from trackers.association.gating import max_eigenvalue_2x2
 
-__all__ = ["CELL_SIGMAS", "MAX_CELLS", "MAX_SENSORS", "MEMORY_SCANS", "PRIOR_SCANS", "ClutterMap"]
+__all__ = [
+    "CELL_SIGMAS",
+    "MAX_CELLS",
+    "MAX_SENSORS",
+    "MEMORY_SCANS",
+    "PRIOR_SCANS",
+    "SCENE_MARGIN",
+    "SCENE_PRIOR_SCANS",
+    "SCENE_SCANS",
+    "ClutterMap",
+]
 
 #: A cell's side, in median position standard deviations of the sensor's detections.
 CELL_SIGMAS = 20.0
@@ -42,6 +61,13 @@ CELL_SIGMAS = 20.0
 MEMORY_SCANS = 100.0
 #: The prior's weight, in scans.
 PRIOR_SCANS = 2.0
+#: The scene density's prior weight (the configured density), in scans of the whole area.
+SCENE_PRIOR_SCANS = 0.02
+#: The scene density stands for the configured one times this margin, no higher than it.
+SCENE_MARGIN = 2.0
+#: The scene's area is the box of the counted detections of this many of the sensor's last
+#: scans that had any.
+SCENE_SCANS = 32
 #: A cell's side at least (m).
 MIN_CELL = 1.0
 #: A batch whose detections would set cells more than this many times finer or coarser than
@@ -73,10 +99,33 @@ class _Grid:
     scans: int = 0
     #: the side the sensor's detections set (``cell`` grows from it when cells are merged)
     base: float = 0.0
+    #: the decayed count of all cells, as of scan ``scans``
+    total: float = 0.0
+    #: the box ``(x0, y0, x1, y1)`` of the counted detections of each of the last
+    #: :data:`SCENE_SCANS` scans that had any
+    boxes: deque[tuple[float, float, float, float]] = field(
+        default_factory=lambda: deque(maxlen=SCENE_SCANS)
+    )
 
     def exposure(self) -> float:
         """``E = Σ_{k<n} γ^k`` over the ``n`` scans counted."""
         return (1.0 - _GAMMA**self.scans) / (1.0 - _GAMMA)
+
+    def scene_density(self, prior: float) -> float:
+        """``λ̄``, the density of the whole area the sensor's counted detections span (the
+        union of :attr:`boxes`, grown by a cell), with the configured ``prior`` weighing
+        :data:`SCENE_PRIOR_SCANS` scans of it (module docstring); ``prior`` before any."""
+        if not self.boxes:
+            return prior
+        b = np.array(self.boxes)
+        area = float(
+            (b[:, 2].max() - b[:, 0].min() + self.cell)
+            * (b[:, 3].max() - b[:, 1].min() + self.cell)
+        )
+        lam = (prior * area * SCENE_PRIOR_SCANS + self.total) / (
+            (SCENE_PRIOR_SCANS + self.exposure()) * area
+        )
+        return min(SCENE_MARGIN * lam, prior)
 
     def cells(self, z: np.ndarray) -> np.ndarray:
         ij = np.floor(z / self.cell).astype(np.int64)
@@ -136,12 +185,13 @@ class ClutterMap:
         if grid is None or grid.scans == 0 or z.shape[0] == 0:
             return np.full(z.shape[0], prior)
         area = grid.cell * grid.cell
-        alpha0 = prior * area * PRIOR_SCANS
+        alpha0 = grid.scene_density(prior) * area * PRIOR_SCANS
         rows, found = grid.find(grid.cells(z))
         counts = np.zeros(z.shape[0])
         if found.any():
             counts[found] = grid.decayed(rows[found])
-        return (alpha0 + counts) / ((PRIOR_SCANS + grid.exposure()) * area)
+        lam = (alpha0 + counts) / ((PRIOR_SCANS + grid.exposure()) * area)
+        return np.maximum(lam, prior * PRIOR_SCANS / (PRIOR_SCANS + MEMORY_SCANS))
 
     def learn(self, sensor_id: str, z_clutter: np.ndarray, R: np.ndarray) -> None:
         """Record one processed scan of ``sensor_id``: ``z_clutter`` the detections taken for
@@ -170,9 +220,13 @@ class ClutterMap:
                 self._grids.popitem(last=False)
         self._grids.move_to_end(sensor_id)
         grid.scans += 1
+        grid.total *= _GAMMA
         z = np.asarray(z_clutter, dtype=float).reshape(-1, 2)
         if z.shape[0] == 0:
             return
+        grid.total += z.shape[0]
+        lo, hi = z.min(axis=0), z.max(axis=0)
+        grid.boxes.append((float(lo[0]), float(lo[1]), float(hi[0]), float(hi[1])))
         keys, n = np.unique(grid.cells(z), return_counts=True)
         rows, old = grid.find(keys)
         if old.any():
