@@ -51,6 +51,7 @@ from service.schemas import MAX_REORDER_WINDOW, BatchError, DetectionBatchIn, In
 from service.state_store import EngineCheckpoint, StateStore, restored_result
 from service.stats import Stats
 from service.viewers import ViewerHub
+from trackers.association.gating import max_eigenvalue_2x2
 from trackers.config import TrackerConfig
 from trackers.extended.tracker import ExtendedTracker, snapshot_of
 from trackers.formation.tracker import FormationTracker
@@ -73,6 +74,14 @@ MAX_NO_COV_NOTES = 1024
 #: fitted them (a wrong sign, another unit, a moving radar without its sensor_velocity).
 RANGE_RATE_SAMPLE = 30
 RANGE_RATE_FIT = 0.5
+#: A sensor is told once that its covariances are too wide when, of its first COV_SAMPLE
+#: batches of at least COV_MIN_DETECTIONS detections, COV_WIDE or more have a median position
+#: standard deviation larger than the diagonal of the box their detections fill (a range and
+#: a bearing mixed up, degrees taken for radians, variances sent where a cov wants squares
+#: of standard deviations in m²...): no set of detections spreads less than its own noise.
+COV_SAMPLE = 10
+COV_MIN_DETECTIONS = 5
+COV_WIDE = 8
 
 
 class _Stop:
@@ -220,6 +229,8 @@ class Engine:
         self._no_cov_sensors: set[str] = set()
         #: range-rates per sensor (came, fitted) until its first RANGE_RATE_SAMPLE are judged
         self._range_rates: dict[str, tuple[int, int]] = {}
+        #: batches per sensor (judged, too wide) until its first COV_SAMPLE are judged
+        self._cov_widths: dict[str, tuple[int, int]] = {}
         self._clocks = SensorClocks()  # each sensor's usual interval, for the time-jump guard
         self._stop_drain_seconds = stop_drain_seconds
         self._state = ReportState.empty()
@@ -913,6 +924,42 @@ class Engine:
                 came,
             )
 
+    def _judge_covariances(self, sensor: str, z: np.ndarray, R: np.ndarray) -> None:
+        """Count a sensor's batches of COV_MIN_DETECTIONS detections or more whose median
+        position standard deviation exceeds the diagonal of the box their detections fill;
+        once COV_SAMPLE are counted, say whether COV_WIDE or more did (once per sensor, for at
+        most MAX_NO_COV_NOTES sensors)."""
+        seen = self._cov_widths.get(sensor)
+        if seen is None:
+            if len(self._cov_widths) >= MAX_NO_COV_NOTES:
+                return
+            seen = (0, 0)
+        if seen[0] < 0 or z.shape[0] < COV_MIN_DETECTIONS:
+            return
+        sigma = float(np.median(np.sqrt(max_eigenvalue_2x2(R))))
+        span = float(np.hypot(*(z.max(axis=0) - z.min(axis=0))))
+        judged, wide = seen[0] + 1, seen[1] + (sigma > span)
+        if judged < COV_SAMPLE:
+            self._cov_widths[sensor] = (judged, wide)
+            return
+        self._cov_widths[sensor] = (-1, -1)
+        if wide >= COV_WIDE:
+            log.warning(
+                "sensor %s: the position standard deviations of its detections (median %.3g m "
+                "in its last batch) exceed the %.3g m over which the batch's %d detections "
+                "spread, in %d of its first %d batches of %d detections or more: its cov "
+                "(m², the squares of standard deviations; from range and bearing, "
+                "J diag(σ_r², σ_θ²) Jᵀ with σ_θ in radians) is likely wrong, and tracks will "
+                "not be confirmed",
+                sensor,
+                sigma,
+                span,
+                z.shape[0],
+                wide,
+                judged,
+                COV_MIN_DETECTIONS,
+            )
+
     def _forget(self, item: Item, batch: DetectionBatchIn) -> None:
         """A batch accepted, then refused by the tracker, is no duplicate if it comes again."""
         if item.digest is not None:
@@ -954,6 +1001,7 @@ class Engine:
             self._note_missing_covariance(batch, pipeline.config.measurement.position_std)
         if result.range_rates[0]:
             self._judge_range_rates(batch.sensor_id, *result.range_rates)
+        self._judge_covariances(batch.sensor_id, scan.z, scan.R)
         self._seq += 1
         self._last_wall = time.monotonic()
         self._clocks.accepted(batch.sensor_id, scan.time, self._last_wall)

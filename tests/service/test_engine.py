@@ -350,3 +350,28 @@ def test_a_sensor_whose_range_rates_disagree_is_told_once(
     assert len(notes) == (1 if warned else 0)
     if warned:
         assert notes[0].startswith("sensor doppler: ") and "positive going away" in notes[0]
+
+
+@pytest.mark.parametrize(("std", "warned"), [(30.0, False), (100e3, True)])
+def test_a_sensor_whose_covariances_are_too_wide_is_told_once(
+    engine: Engine, caplog: pytest.LogCaptureFixture, std: float, warned: bool
+) -> None:
+    """A newcomer's covariances 100 km wide (a range term doubled into the bearing's): every
+    batch was taken, nothing was confirmed, and nothing said why. 20 detections a batch over
+    60 km: said once, after the first 10 batches; 30 m, never."""
+    rng = np.random.default_rng(0)
+    cov = [[std**2, 0.0], [0.0, std**2]]
+
+    def batch(t: float) -> bytes:
+        xy = rng.uniform(-30e3, 30e3, (20, 2))
+        dets = [{"x": float(x), "y": float(y)} for x, y in xy]
+        return orjson.dumps({"sensor_id": "wide", "time": t, "detections": dets, "cov": cov})
+
+    with caplog.at_level("WARNING", logger="service.engine"):
+        run_batches(engine, [batch(float(t)) for t in range(9)], key=None)
+        assert not [r for r in caplog.records if "standard deviations" in r.getMessage()]
+        run_batches(engine, [batch(float(t)) for t in range(9, 30)], key=None)
+    notes = [r.getMessage() for r in caplog.records if "standard deviations" in r.getMessage()]
+    assert len(notes) == (1 if warned else 0)
+    if warned:
+        assert notes[0].startswith("sensor wide: ") and "in 10 of its first 10 batches" in notes[0]
