@@ -9,17 +9,18 @@ detection probability ``P_D`` gives with probability at most β (``p_true_delete
     m* = ln β / ln(1 − P_D),   clamped to [MIN_MISSES, MAX_MISSES].
 
 With β = 1e-3 a track is deleted at its third consecutive miss at ``P_D`` 0.9 (2.5 revisits),
-at its fifth at 0.8 and its sixth at 0.7. Past ``MIN_MISSES`` it coasts on only while its gate
-is clear of clutter (:func:`trackers.individual` decides: fewer than 0.1 false alarms expected
+at its fourth at 0.8 and its sixth at 0.7. Past ``MIN_MISSES`` it coasts on only while its gate
+is clear of clutter (:mod:`trackers.individual` decides: fewer than 0.1 false alarms expected
 in it); a track lost for long in clutter has a gate wide enough to take a false alarm and fly
 off with it.
 
 A scan that states its ``pd`` is taken at its word. For the others, :class:`DetectionRates`
 learns each sensor's ``P_D`` from its *looks*: a confirmed track of at least
 :data:`LOOK_MIN_HITS` detections, in the scan's view, outside every peer's resolution cell,
-and detected since the sensor's previous scan, is either detected by this scan or missed. A
-track whose target is gone counts its first miss only (it was not detected since), so dead
-tracks do not drag the estimate down. The counts fade by :data:`FADE` a scan of the sensor
+and detected within the last 1.5 of its revisits, is either detected by this scan or missed
+(a sector of a revolution looks at the tracks it detected a revolution before). A track
+whose target is gone counts its first miss only (it was not detected since), so dead tracks
+do not drag the estimate down. The counts fade by :data:`FADE` a scan of the sensor
 and start from :data:`PRIOR_LOOKS` looks at the configured ``pd``:
 
     P̂_D = (Σ detected + w₀ P_D,0) / (Σ looks + w₀).
@@ -56,7 +57,8 @@ def coast_revisits(pd: float, beta: float) -> float:
         m* = ln β / ln(1 − P_D),   clamped to [MIN_MISSES, MAX_MISSES],
 
     taken unrounded so that a learned ``P_D`` a little off its true value moves the limit a
-    little (3 misses at 0.9: deleted at the third; 4.3 at 0.8: at the fifth; 5.7 at 0.7)."""
+    little (3 misses at 0.9: deleted at the third; 4.3 at 0.8: at the fourth; 5.7 at 0.7: at
+    the sixth)."""
     if not 0.0 < pd < 1.0:
         m = float(MIN_MISSES)
     else:
@@ -90,6 +92,11 @@ class DetectionRates:
         """The sensor's learned ``P_D`` (``prior`` for a sensor not heard yet)."""
         rate = self.sensors.get(sensor_id)
         return prior if rate is None else rate.estimate(prior)
+
+    def lowest(self, prior: float) -> float:
+        """The lowest learned ``P_D`` of all sensors, and ``prior``'s: the most lenient
+        coasting limit, for a track out of the view of the sensor at hand."""
+        return min([prior, *(r.estimate(prior) for r in self.sensors.values())])
 
     def learned(self, sensor_id: str, time: float, looks: int, detected: int) -> DetectionRates:
         """A new record with the sensor's scan at ``time``: ``looks`` established tracks

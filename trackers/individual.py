@@ -84,7 +84,7 @@ KIND = "individual"
 #: whatever its score (tracks handed in by peers keep their status).
 MIN_CONFIRM_HITS = 3
 
-#: A confirmed track with this many detections may coast through m* − 1 missed revisits of its
+#: A confirmed track with this many detections may coast for m* − ½ revisits of its
 #: sensor, however short ``max_coast_time`` (:mod:`trackers.detection_rate`): a GMTI revisiting
 #: every 10 s misses a vehicle twice in a row now and then (1 % a scan at P_D 0.9), and
 #: ``max_coast_time`` 10 s deleted it at the second miss.
@@ -345,7 +345,6 @@ class IndividualTracker:
         pd_sensor = tm.pd if scan.pd is None else float(scan.pd)
         lam_fa = _clutter_densities(scan, tm.clutter_density)
         rates = self._state.rates
-        last_look = rates.of(scan.sensor_id)
         pd_coast = rates.estimate(scan.sensor_id, tm.pd) if scan.pd is None else pd_sensor
         reach = coast_revisits(pd_coast, tm.p_true_delete)
         longer = reach > MIN_MISSES - 0.5  # a sensor that misses more than P_D 0.9 does
@@ -370,6 +369,7 @@ class IndividualTracker:
         range_rates = (0, 0)
         established = np.zeros(scan.size, dtype=bool)
         looks = detected = 0
+        lam_gated = np.zeros(0)
         if len(tracks):
             pd = np.full(len(tracks), pd_sensor)
             if directives.pd:
@@ -387,13 +387,12 @@ class IndividualTracker:
                 searching = (t - pred.tracks.updated) * _coast_rate(
                     pred.tracks, tm.max_coast_time, pd_coast, MIN_MISSES - 0.5
                 ) <= tm.max_coast_time
-            tracks, claims, range_rates, established = self._update_existing(
+            tracks, claims, range_rates, established, lam_gated = self._update_existing(
                 pred, scan, pd, lam_fa, seen, searching
             )
-            if last_look is not None:
-                look = _looks(pred.tracks, seen, masked, last_look.time)
-                looks = int(look.sum())
-                detected = int((look & (tracks.updated == t)).sum())
+            look = _looks(pred.tracks, seen, masked, t, pd_coast)
+            looks = int(look.sum())
+            detected = int((look & (tracks.updated == t)).sum())
             # dropped with the deleted tracks below; rivals out of view wait for a scan that
             # looks at them
             rivals = ~_best_of_each_origin(tracks)
@@ -415,17 +414,19 @@ class IndividualTracker:
         # A track whose detection probability a peer lowered (a vehicle inside a convoy's
         # resolution cell) is expected to go undetected for longer: its coasting time counts
         # at the rate P_D / P_D,sensor while it is there. A track of a slow sensor may coast
-        # through m* − 1 of its missed revisits, m* from the sensor's detection probability,
+        # for m* − ½ of its revisits, m* from the sensor's detection probability,
         # stated or learned (:mod:`trackers.detection_rate`). The lower rate counts.
-        # Past MIN_MISSES, only a track whose gate is clear of clutter coasts on.
+        # Past MIN_MISSES, only a track whose gate is clear of clutter coasts on. A track out
+        # of this sensor's view is held to the most lenient of the sensors' limits.
         revisits: float | np.ndarray = reach
-        if n_old and longer:
-            lam = lam_fa if isinstance(lam_fa, float) else tm.clutter_density
-            if isinstance(lam_fa, np.ndarray) and lam_fa.size:
-                lam = float(np.median(lam_fa))
-            crowded = _crowded_gates(pred.Pc, scan, lam, config.gating.threshold)
+        idle = np.zeros(0, dtype=np.intp) if seen is None else np.flatnonzero(~seen)
+        if n_old and (longer or idle.size):
             revisits = np.full(len(tracks), reach)
-            revisits[:n_old][crowded] = MIN_MISSES - 0.5
+            if longer:
+                crowded = _crowded_gates(pred.Pc, scan, lam_fa, lam_gated, config.gating.threshold)
+                revisits[:n_old][crowded] = MIN_MISSES - 0.5
+            if idle.size:
+                revisits[idle] = coast_revisits(rates.lowest(tm.pd), tm.p_true_delete)
         rate = _coast_rate(tracks, tm.max_coast_time, pd_coast, revisits)
         if masked.size and (masked < 1.0).any():
             rate[: masked.size] = np.minimum(rate[: masked.size], masked)
@@ -443,11 +444,13 @@ class IndividualTracker:
         newly = status.confirmed & ~tracks.confirmed & (tracks.hits >= MIN_CONFIRM_HITS)
         # A track of 3 detections or more on a target whose confirmed track lost it (it
         # sped up, braked, turned out of the gate) is that track again, confirmed or not yet
-        # (a positive score: likelier a target than not): the old id goes on with it.
+        # (a score of 0 or more: no less likely a target than not): the old id goes on with
+        # it. Tracks handed back by peers at this scan (rows from n_old on) are left alone.
         young = ~tracks.confirmed & (tracks.hits >= MIN_CONFIRM_HITS) & ~delete
         young &= newly | (tracks.score >= 0.0)
+        young[n_old:] = False
         if young.any():
-            tracks, young, delete = _relinked(tracks, young, delete, t, config)
+            tracks, young, delete = _relinked(tracks, young, delete, t, config, n_old)
             newly &= ~delete
         deleted_ids = renamed + tuple(tracks.ids[delete & tracks.confirmed].tolist())
         tracks = replace(tracks, confirmed=newly | (tracks.confirmed & ~delete))
@@ -488,7 +491,7 @@ class IndividualTracker:
         lam_fa: float | np.ndarray,
         seen: np.ndarray | None,
         searching: np.ndarray | None,
-    ) -> tuple[TrackArrays, np.ndarray, tuple[int, int], np.ndarray]:
+    ) -> tuple[TrackArrays, np.ndarray, tuple[int, int], np.ndarray, np.ndarray]:
         """The tracks updated with this scan (``pd`` the detection probability of each), and
         each detection's *claim* (``lam_fa`` the false-alarm density, one or one a detection):
         ``+inf`` where a confirmed track took it or has it in its
@@ -496,8 +499,9 @@ class IndividualTracker:
         free. A track that is not ``seen`` (out of the scan's coverage; ``None``: all are) and
         takes no detection keeps its score: it was not missed, only not looked at. Last, the
         number of range-rates of the detections confirmed tracks took, and of those used
-        (inside their gate), and the detections taken by tracks of at least
-        :data:`ESTABLISHED_HITS` detections."""
+        (inside their gate), the detections taken by tracks of at least
+        :data:`ESTABLISHED_HITS` detections, and each track's highest false-alarm density
+        among the detections in its gate (NaN: none in it)."""
         config, tracks = pred.config, pred.tracks
         x_pred, P_pred, c_bar, xc, Pc = pred.x_pred, pred.P_pred, pred.c_bar, pred.xc, pred.Pc
         pairs = gate(xc[:, :2], Pc[:, :2, :2], scan.z, scan.R, config.gating.threshold)
@@ -589,7 +593,12 @@ class IndividualTracker:
             updated=updated,
             detection_ids=det_ids,
         )
-        return new, claims, range_rates, established
+        lam_gated = np.full(len(tracks), np.nan)
+        if ti.size:
+            lam_gated[:] = -np.inf
+            np.maximum.at(lam_gated, ti, np.broadcast_to(_at(lam_fa, dj), ti.shape))
+            lam_gated[np.isneginf(lam_gated)] = np.nan
+        return new, claims, range_rates, established, lam_gated
 
     def _initiate_two_point(
         self,
@@ -1344,92 +1353,153 @@ def _coast_rate(
 GATE_CLUTTER = 0.1
 
 
-def _crowded_gates(Pc: np.ndarray, scan: Scan, lam: float, gamma: float) -> np.ndarray:
+def _crowded_gates(
+    Pc: np.ndarray,
+    scan: Scan,
+    lam_fa: float | np.ndarray,
+    lam_gated: np.ndarray,
+    gamma: float,
+) -> np.ndarray:
     """Mask of the tracks whose gate expects at least :data:`GATE_CLUTTER` false alarms:
 
-        λ̄ V ≥ GATE_CLUTTER,   V = π γ √det(P_pos + R̄),
+        λ V ≥ GATE_CLUTTER,   V = π γ √det(P_pos + R̄),
 
-    with ``P_pos`` a track's predicted position covariance, ``R̄`` the scan's median detection
-    covariance and ``λ̄`` = ``lam`` its (median) false-alarm density."""
-    S = Pc[:, :2, :2]
-    if scan.size:
-        S = S + np.median(scan.R, axis=0)
+    with ``P_pos`` a track's predicted position covariance and ``R̄`` the scan's median
+    detection covariance; ``λ`` the highest false-alarm density among the detections in the
+    track's gate (``lam_gated``), else the scan's (its median where the clutter map gives one
+    per detection). A scan with no detection leaves every gate clear: there is nothing in it
+    to take."""
+    if scan.size == 0:
+        return np.zeros(Pc.shape[0], dtype=bool)
+    scene = float(np.median(lam_fa)) if isinstance(lam_fa, np.ndarray) else float(lam_fa)
+    lam = np.where(np.isnan(lam_gated), scene, lam_gated)
+    S = Pc[:, :2, :2] + np.median(scan.R, axis=0)
     det = S[:, 0, 0] * S[:, 1, 1] - S[:, 0, 1] ** 2
     return lam * np.pi * gamma * np.sqrt(np.maximum(det, 0.0)) >= GATE_CLUTTER
 
 
 def _looks(
-    tracks: TrackArrays, seen: np.ndarray | None, masked: np.ndarray, last_scan: float
+    tracks: TrackArrays, seen: np.ndarray | None, masked: np.ndarray, t: float, pd: float
 ) -> np.ndarray:
     """Mask of the tracks (before this scan's update) that count as a look of the sensor at
     an established target (:mod:`trackers.detection_rate`): confirmed, with at least
     :data:`~trackers.detection_rate.LOOK_MIN_HITS` detections, in view, outside every peer's
-    resolution cell, and detected at or since the sensor's previous scan at ``last_scan``."""
-    look = tracks.confirmed & (tracks.hits >= LOOK_MIN_HITS) & (tracks.updated >= last_scan)
+    resolution cell, and detected within 1.5 revisits ``T̂`` (the track's, as in
+    :func:`_coast_rate`): a target missed since counts its first miss only, and a sector of a
+    revolution counts the tracks it detected a revolution before."""
+    hits = tracks.hits
+    revisit = pd * (tracks.updated - tracks.created) / np.maximum(hits - 1, 1)
+    look = tracks.confirmed & (hits >= LOOK_MIN_HITS) & (t - tracks.updated <= 1.5 * revisit)
     look &= masked >= 1.0
     if seen is not None:
         look &= seen
     return look
 
 
+#: The acceleration a relinked target may have had, at least (m/s²): a car pulling away, a
+#: helicopter leaving its hover (the turn-rate bound ``ω_max |v|`` is nothing at rest).
+RELINK_MIN_ACCELERATION = 5.0
+
+
 def _relinked(
-    tracks: TrackArrays, young: np.ndarray, delete: np.ndarray, t: float, config: TrackerConfig
+    tracks: TrackArrays,
+    young: np.ndarray,
+    delete: np.ndarray,
+    t: float,
+    config: TrackerConfig,
+    n_old: int,
 ) -> tuple[TrackArrays, np.ndarray, np.ndarray]:
     """Young tracks (``young``: tentative ones of at least 3 detections that are confirmed
-    at this scan or have a positive score) that continue a confirmed track which lost their
-    target, merged into it: the old track takes the young one's state, detections and score
-    (if higher) and goes on under its id, confirmed; the young one is dropped. Returns the
-    tracks, ``young`` and ``delete`` (the old track kept, the young one dropped).
+    at this scan or score 0 or more) that continue a confirmed track which lost their
+    target, merged into it: the old track takes the young one's state and detections, goes
+    on under its id, confirmed, with the higher of the two scores as its score and its peak;
+    the young one is dropped. Returns the tracks, ``young`` and ``delete`` (the old track
+    kept, the young one dropped). Only the first ``n_old`` rows (the tracks before this
+    scan's births and hand-backs) take part.
 
-    A confirmed track *o* last updated at ``t_o`` (not at this scan, and no later than the
-    first detection of the young track *n*) is continued by *n* when a constant acceleration
+    A confirmed track *o* last updated at ``t_o`` (not at this scan, and before the first
+    detection of the young track *n*) is continued by *n* when a constant acceleration
     ``a = (v_n − v_o) / Δt``, ``Δt = t − t_o``, takes *o*'s state at ``t_o`` to *n*'s at
-    ``t``, within the gate and no harder than ``gating.manoeuvre_acceleration``:
+    ``t``, within the gate, no harder than a manoeuvre can be and likelier than a new target:
 
         e = p_n − p̂_o − ½ (v_n − v_o) Δt,
         S = P_n,pp + P̂_o,pp + (Δt/2)² (P_n,vv + P̂_o,vv),
-        eᵀ S⁻¹ e ≤ γ,   |a| ≤ a_max,
+        eᵀ S⁻¹ e ≤ γ,   N(e; 0, S) ≥ λ_nt,
+        |a| ≤ min(a_max, max(a_0, ω_max max(|v_o|, |v_n|))),
 
     with ``p̂_o = p_o + v_o Δt`` the old track's prediction to ``t`` (its covariance grown by
-    the coasting). The likeliest pairs are merged first, each track at most once. A target
-    that sped up from a hover, braked hard or turned out of its track's gate was otherwise
-    seen by a second track while the first coasted on beside it, then deleted: the target
-    changed id. A young track that is not confirmed yet must be likelier a target than not
-    (score ≥ 0): in dense clutter three false alarms in a row fit a coasting track's wide
-    prediction now and then."""
-    new = np.flatnonzero(young)
-    old = np.flatnonzero(tracks.confirmed & (tracks.updated < t))
-    if old.size == 0:
+    the coasting), ``λ_nt`` the new-target density (a vague old track, long lost, loses to
+    a new target), ``a_max`` and ``ω_max`` the manoeuvre search's bounds and ``a_0`` =
+    :data:`RELINK_MIN_ACCELERATION`. The likeliest pairs (highest ``N(e; 0, S)``) are
+    merged first, each track at most once. A target that set off from a hover, braked hard
+    or turned out of its track's gate was otherwise seen by a second track while the first
+    coasted on beside it, then deleted: the target changed id. A young track that is not
+    confirmed yet must score 0 or more: in dense clutter three false alarms in a row fit a
+    coasting track's wide prediction now and then."""
+    head = np.zeros(len(tracks), dtype=bool)
+    head[:n_old] = True
+    new = np.flatnonzero(young & head)
+    old = np.flatnonzero(tracks.confirmed & head & (tracks.updated < t))
+    if new.size and old.size:  # only those lost before the youngest started
+        old = old[tracks.updated[old] < tracks.created[new].max()]
+    if new.size == 0 or old.size == 0:
         return tracks, young, delete
+    gating = config.gating
+    gamma = gating.threshold
     xn, Pn = tracks.x_comb[new], tracks.P_comb[new]
     xo, Po = tracks.x_comb[old], tracks.P_comb[old]
     dt = t - tracks.updated[old]
-    dv = xn[:, None, 2:4] - xo[None, :, 2:4]
-    e = xn[:, None, 0:2] - xo[None, :, 0:2] - 0.5 * dv * dt[None, :, None]
-    h2 = (0.5 * dt)[None, :, None, None] ** 2
-    S = (
-        Pn[:, None, 0:2, 0:2]
-        + Po[None, :, 0:2, 0:2]
-        + h2 * (Pn[:, None, 2:4, 2:4] + Po[None, :, 2:4, 2:4])
+    speed = np.maximum(
+        np.hypot(xn[:, None, 2], xn[:, None, 3]), np.hypot(xo[None, :, 2], xo[None, :, 3])
     )
-    a, b, c = S[..., 0, 0], S[..., 0, 1], S[..., 1, 1]
+    a_bound = np.minimum(
+        gating.manoeuvre_acceleration,
+        np.maximum(RELINK_MIN_ACCELERATION, gating.manoeuvre_turn_rate * speed),
+    )
+
+    # A cheap bound first (traces for the largest eigenvalues): |p_n − p̂_o| can be at most
+    # the gate's radius plus half the largest velocity change's displacement.
+    tr_n = np.trace(Pn[:, 0:2, 0:2], axis1=1, axis2=2), np.trace(Pn[:, 2:4, 2:4], axis1=1, axis2=2)
+    tr_o = np.trace(Po[:, 0:2, 0:2], axis1=1, axis2=2), np.trace(Po[:, 2:4, 2:4], axis1=1, axis2=2)
+    h2 = (0.5 * dt)[None, :] ** 2
+    radius = (
+        np.sqrt(
+            gamma
+            * (tr_n[0][:, None] + tr_o[0][None, :] + h2 * (tr_n[1][:, None] + tr_o[1][None, :]))
+        )
+        + 0.5 * a_bound * dt[None, :] ** 2
+    )
+    near = np.hypot(xn[:, None, 0] - xo[None, :, 0], xn[:, None, 1] - xo[None, :, 1]) <= radius
+    near &= tracks.updated[old][None, :] < tracks.created[new][:, None]
+    ni, oj = np.nonzero(near)
+    if ni.size == 0:
+        return tracks, young, delete
+    dv = xn[ni, 2:4] - xo[oj, 2:4]
+    e = xn[ni, 0:2] - xo[oj, 0:2] - 0.5 * dv * dt[oj, None]
+    S = (
+        Pn[ni, 0:2, 0:2]
+        + Po[oj, 0:2, 0:2]
+        + h2[0, oj, None, None] * (Pn[ni, 2:4, 2:4] + Po[oj, 2:4, 2:4])
+    )
+    a, b, c = S[:, 0, 0], S[:, 0, 1], S[:, 1, 1]
     det = a * c - b * b
-    ex, ey = e[..., 0], e[..., 1]
+    ex, ey = e[:, 0], e[:, 1]
     m = (c * ex * ex - 2.0 * b * ex * ey + a * ey * ey) / np.maximum(det, 1e-300)
+    cost = 0.5 * m + np.log(2.0 * np.pi * np.sqrt(np.maximum(det, 1e-300)))  # −ln N(e; 0, S)
     fits = (
-        (tracks.updated[old][None, :] <= tracks.created[new][:, None])
-        & (det > 0.0)
-        & (m <= config.gating.threshold)
-        & (np.hypot(dv[..., 0], dv[..., 1]) <= config.gating.manoeuvre_acceleration * dt)
+        (det > 0.0)
+        & (m <= gamma)
+        & (cost <= -math.log(config.track_management.new_target_density))
+        & (np.hypot(dv[:, 0], dv[:, 1]) <= a_bound[ni, oj] * dt[oj])
     )
     if not fits.any():
         return tracks, young, delete
-    ni, oj = np.nonzero(fits)
-    order = np.argsort(m[ni, oj], kind="stable")
+    ni, oj, cost = ni[fits], oj[fits], cost[fits]
     pairs: list[tuple[int, int]] = []
     used_n: set[int] = set()
     used_o: set[int] = set()
-    for i, j in zip(ni[order].tolist(), oj[order].tolist(), strict=True):
+    for k in np.argsort(cost, kind="stable").tolist():
+        i, j = int(ni[k]), int(oj[k])
         if i not in used_n and j not in used_o:
             used_n.add(i)
             used_o.add(j)
@@ -1441,7 +1511,7 @@ def _relinked(
         fields[k][ro] = fields[k][rn]
     fields["hits"][ro] += fields["hits"][rn]
     fields["score"][ro] = np.maximum(fields["score"][ro], fields["score"][rn])
-    fields["peak"][ro] = np.maximum(fields["peak"][ro], fields["score"][ro])
+    fields["peak"][ro] = fields["score"][ro]  # found again: the drop from the peak restarts
     young = young.copy()
     delete = delete.copy()
     young[rn] = False

@@ -142,10 +142,10 @@ def test_a_slow_sensors_track_coasts_through_two_missed_revisits(revisit, pd):
     assert at == (30.0 if revisit == 10.0 else 11.0)
 
 
-def _coasted_misses(pd=None, lam=1e-9, scans=80):
+def _coasted_misses(pd=None, lam=1e-9, scans=80, far=None):
     """A target every 5 s seen by a sensor with P_D 0.7 for ``scans`` scans (never 3 misses
     in a row), then never again: the number of misses in a row its track coasted through,
-    and the tracker."""
+    and the tracker. ``far``: a false alarm there in every scan after that."""
     tr = IndividualTracker(TrackerConfig())
     rng = np.random.default_rng(4)
     truth = lambda k: np.array([1000.0 + 50.0 * k, 500.0])  # noqa: E731
@@ -159,7 +159,8 @@ def _coasted_misses(pd=None, lam=1e-9, scans=80):
     last = scans - 1
     (tid,) = [t.id for t in res.confirmed()]
     for k in range(scans, scans + 20):
-        if tid in tr.step(scan_at(5.0 * k, np.zeros((0, 2)), pd=pd, lam=lam)).deleted:
+        z = np.zeros((0, 2)) if far is None else np.asarray(far, dtype=float)
+        if tid in tr.step(scan_at(5.0 * k, z, pd=pd, lam=lam)).deleted:
             return k - last - 1, tr
     raise AssertionError("never deleted")
 
@@ -181,8 +182,12 @@ def test_a_track_coasts_longer_on_a_sensor_that_misses_more():
 
 def test_a_track_whose_gate_is_full_of_clutter_does_not_coast_longer():
     """Past the third miss a track's gate is wide; in clutter it takes a false alarm and flies
-    off with it. So only a track whose gate expects under 0.1 false alarms coasts on."""
-    assert _coasted_misses(pd=0.7, lam=1e-5)[0] == 2
+    off with it. So only a track whose gate expects under 0.1 false alarms coasts on: at the
+    scan's density (1e-5 per m², stated, a false alarm 50 km away in each), or the highest
+    among the detections in its gate. A scan with no detection leaves the gate clear (there
+    is nothing in it to take)."""
+    assert _coasted_misses(pd=0.7, lam=1e-5, far=[50e3, 50e3])[0] == 2
+    assert _coasted_misses(pd=0.7, lam=1e-5)[0] == 5
 
 
 def test_a_sensor_never_heard_has_the_configured_detection_probability():
@@ -213,7 +218,7 @@ def _pulling_away(seed, speed=20.0, *, appears=None):
     return ids, deleted
 
 
-@pytest.mark.parametrize("seed", [0, 3])
+@pytest.mark.parametrize("seed", range(6))
 def test_a_track_that_lost_its_target_goes_on_with_the_new_track_that_found_it(seed):
     """The target sets off from rest: its track, sure it stands still, loses it and coasts,
     while its detections start a new track (before: T2 confirmed, T1 deleted). A young track
@@ -223,10 +228,11 @@ def test_a_track_that_lost_its_target_goes_on_with_the_new_track_that_found_it(s
     assert ids == {"T1"} and deleted == []
 
 
-def test_a_new_target_away_from_a_lost_one_keeps_its_own_id():
-    """A target that vanishes and another that appears 1.5 km away, moving across it: no
-    constant acceleration within the gate joins them, so the new one gets its own id."""
-    ids, deleted = _pulling_away(0, appears=(2500.0, 0.0))
+@pytest.mark.parametrize("seed", range(6))
+def test_a_new_target_beside_a_lost_one_keeps_its_own_id(seed):
+    """A target at rest that vanishes and another that appears 300 m (30 σ) away moving
+    across at 20 m/s: a new target is likelier than that jump, so it gets its own id."""
+    ids, deleted = _pulling_away(seed, appears=(1000.0, 300.0))
     assert ids == {"T1", "T2"} and deleted == ["T1"]
 
 
@@ -491,3 +497,109 @@ def test_the_step_counts_the_range_rates_of_confirmed_tracks() -> None:
     assert came > 15 and fitted == came
     came, fitted = counts[-1.0]
     assert came > 15 and fitted == 0
+
+
+def test_another_sensors_scans_do_not_shorten_a_tracks_coasting():
+    """Radar A (P_D 0.7) and radar B (P_D 0.95) 100 km apart, each stating its coverage: B's
+    scans, which do not see A's target, held its track to B's own limit (deleted at the 4th
+    miss instead of the 6th). A track out of view is held to the most lenient limit."""
+    from trackers.coverage import Coverage
+
+    def square(x0, y0, side):
+        return Coverage(
+            polygon=np.array([[x0, y0], [x0 + side, y0], [x0 + side, y0 + side], [x0, y0 + side]])
+        )
+
+    cover_a, cover_b = square(-1e4, -1e4, 3e4), square(1e5, 1e5, 1e4)
+
+    def coasted(with_b):
+        tr = IndividualTracker(TrackerConfig())
+        rng = np.random.default_rng(4)
+        seen = rng.random(80) < 0.7
+        seen[:4] = seen[-1] = True
+        for k in range(2, 80):
+            seen[k] |= not (seen[k - 1] or seen[k - 2])
+
+        def step(k, z):
+            z = np.asarray(z, dtype=float).reshape(-1, 2)
+            r = np.tile(SIGMA**2 * np.eye(2), (len(z), 1, 1))
+            res = tr.step(Scan("A", 5.0 * k, z, r, pd=0.7, clutter_density=1e-9, coverage=cover_a))
+            gone = list(res.deleted)
+            if with_b:
+                zb = np.array([[1.05e5, 1.05e5]]) + rng.normal(0.0, SIGMA, 2)
+                rb = np.tile(SIGMA**2 * np.eye(2), (1, 1, 1))
+                scan_b = Scan(
+                    "B", 5.0 * k + 2.5, zb, rb, pd=0.95, clutter_density=1e-9, coverage=cover_b
+                )
+                gone += list(tr.step(scan_b).deleted)
+            return res, gone
+
+        for k in range(80):
+            z = np.array([1000 + 50.0 * k, 500.0]) + rng.normal(0.0, SIGMA, 2) if seen[k] else ()
+            res, _ = step(k, z)
+        (tid,) = [t.id for t in res.confirmed() if abs(t.position[1] - 500.0) < 300.0]
+        for k in range(80, 100):
+            if tid in step(k, ())[1]:
+                return k - 80
+        raise AssertionError("never deleted")
+
+    assert coasted(False) == coasted(True) == 5
+
+
+@pytest.mark.parametrize("sectors", [False, True])
+def test_a_sensors_detection_probability_is_learned_from_full_scans_and_sectors(sectors):
+    """Six targets seen 7 times in 10, scanned whole every 5 s or as two half-revolution
+    sectors (each stating its coverage): the sensor's P_D is learned either way (sectors
+    were never counted: a track detected a revolution before was not looked at since the
+    previous, other, sector)."""
+    from trackers.coverage import Coverage
+
+    left = Coverage(polygon=np.array([[-1e5, -1e5], [0, -1e5], [0, 1e5], [-1e5, 1e5]]))
+    right = Coverage(polygon=np.array([[0, -1e5], [1e5, -1e5], [1e5, 1e5], [0, 1e5]]))
+    tr = IndividualTracker(TrackerConfig())
+    rng = np.random.default_rng(1)
+
+    def scan(t, z, cover):
+        r = np.tile(SIGMA**2 * np.eye(2), (len(z), 1, 1))
+        return Scan("r", t, z, r, clutter_density=1e-9, coverage=cover)
+
+    for k in range(200):
+        pts = [np.array([-20000.0 + 25.0 * k + 8000.0 * (j % 2), 2000.0 * j]) for j in range(6)]
+        pts = [p + rng.normal(0.0, SIGMA, 2) for p in pts if rng.random() < 0.7]
+        z = np.array(pts).reshape(-1, 2)
+        if sectors:
+            tr.step(scan(5.0 * k, z[z[:, 0] < 0], left))
+            tr.step(scan(5.0 * k + 2.5, z[z[:, 0] >= 0], right))
+        else:
+            tr.step(scan(5.0 * k, z, None))
+    assert tr.detection_probability("r") == pytest.approx(0.7, abs=0.05)
+
+
+def test_a_track_missed_by_empty_scans_with_the_clutter_map_coasts_as_long():
+    """A lone target in a clean scene, through the pipeline with the clutter map: the scans
+    that miss it are empty, which read as the configured 1e-6 per m² and a gate full of
+    clutter, so the track was deleted at its 3rd miss instead of its 6th."""
+    from trackers.pipeline import TrackingPipeline
+
+    pipe = TrackingPipeline(TrackerConfig())
+    rng = np.random.default_rng(4)
+    seen = rng.random(80) < 0.7
+    seen[:4] = seen[-1] = True
+    for k in range(2, 80):
+        seen[k] |= not (seen[k - 1] or seen[k - 2])
+    for k in range(80):
+        z = np.array([1000 + 50.0 * k, 500.0]) + rng.normal(0.0, SIGMA, 2) if seen[k] else ()
+        z = np.asarray(z, dtype=float).reshape(-1, 2)
+        res = pipe.process(
+            Scan("r", 5.0 * k, z, np.tile(SIGMA**2 * np.eye(2), (len(z), 1, 1)), pd=0.7)
+        )
+    (tid,) = [t.id for t in res.confirmed()]
+    for k in range(80, 100):
+        if (
+            tid
+            in pipe.process(
+                Scan("r", 5.0 * k, np.zeros((0, 2)), np.zeros((0, 2, 2)), pd=0.7)
+            ).deleted
+        ):
+            break
+    assert k - 80 == 5
