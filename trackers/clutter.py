@@ -14,7 +14,8 @@ of three or more detections took (what the pipeline passes to :meth:`ClutterMap.
 exponential forgetting over about :data:`MEMORY_SCANS` of the sensor's scans, and its density
 is the posterior mean of a Poisson rate with a gamma prior whose weight is :data:`PRIOR_SCANS`
 scans and whose mean λ₀ is the scene's: the density of all the sensor's counts ``C`` over the
-box ``A_s`` that those of its last :data:`SCENE_SCANS` scans span (grown by a cell), the
+box ``A_s`` that those of its last :data:`SCENE_SCANS` scans span (the median of their
+boxes, grown by a cell), the
 configured density ``λ_c`` weighing :data:`SCENE_PRIOR_SCANS` scans of it, times
 :data:`SCENE_MARGIN` and no more than ``λ_c``:
 
@@ -113,15 +114,14 @@ class _Grid:
 
     def scene_density(self, prior: float) -> float:
         """``λ̄``, the density of the whole area the sensor's counted detections span (the
-        union of :attr:`boxes`, grown by a cell), with the configured ``prior`` weighing
+        median of :attr:`boxes`, grown by a cell), with the configured ``prior`` weighing
         :data:`SCENE_PRIOR_SCANS` scans of it (module docstring); ``prior`` before any."""
         if not self.boxes:
             return prior
-        b = np.array(self.boxes)
-        area = float(
-            (b[:, 2].max() - b[:, 0].min() + self.cell)
-            * (b[:, 3].max() - b[:, 1].min() + self.cell)
-        )
+        # the median of the scans' boxes: one far false alarm (or a target's detection) does
+        # not make the whole scene that wide
+        x0, y0, x1, y1 = np.median(np.array(self.boxes), axis=0).tolist()
+        area = (x1 - x0 + self.cell) * (y1 - y0 + self.cell)
         lam = (prior * area * SCENE_PRIOR_SCANS + self.total) / (
             (SCENE_PRIOR_SCANS + self.exposure()) * area
         )

@@ -142,6 +142,16 @@ def test_a_slow_sensors_track_coasts_through_two_missed_revisits(revisit, pd):
     assert at == (30.0 if revisit == 10.0 else 11.0)
 
 
+def _seen_7_in_10(rng, scans):
+    """Which of ``scans`` scans detect a target with P_D 0.7: never 3 misses in a row, the
+    first 4 and the last detected."""
+    seen = rng.random(scans) < 0.7
+    seen[:4] = seen[-1] = True
+    for k in range(2, scans):
+        seen[k] |= not (seen[k - 1] or seen[k - 2])
+    return seen
+
+
 def _coasted_misses(pd=None, lam=1e-9, scans=80, far=None):
     """A target every 5 s seen by a sensor with P_D 0.7 for ``scans`` scans (never 3 misses
     in a row), then never again: the number of misses in a row its track coasted through,
@@ -149,10 +159,7 @@ def _coasted_misses(pd=None, lam=1e-9, scans=80, far=None):
     tr = IndividualTracker(TrackerConfig())
     rng = np.random.default_rng(4)
     truth = lambda k: np.array([1000.0 + 50.0 * k, 500.0])  # noqa: E731
-    seen = rng.random(scans) < 0.7
-    seen[:4] = seen[-1] = True
-    for k in range(2, scans):
-        seen[k] |= not (seen[k - 1] or seen[k - 2])
+    seen = _seen_7_in_10(rng, scans)
     for k in range(scans):
         z = truth(k) + rng.normal(0.0, SIGMA, 2) if seen[k] else np.zeros((0, 2))
         res = tr.step(scan_at(5.0 * k, z, pd=pd, lam=lam))
@@ -515,10 +522,7 @@ def test_another_sensors_scans_do_not_shorten_a_tracks_coasting():
     def coasted(with_b):
         tr = IndividualTracker(TrackerConfig())
         rng = np.random.default_rng(4)
-        seen = rng.random(80) < 0.7
-        seen[:4] = seen[-1] = True
-        for k in range(2, 80):
-            seen[k] |= not (seen[k - 1] or seen[k - 2])
+        seen = _seen_7_in_10(rng, 80)
 
         def step(k, z):
             z = np.asarray(z, dtype=float).reshape(-1, 2)
@@ -583,10 +587,7 @@ def test_a_track_missed_by_empty_scans_with_the_clutter_map_coasts_as_long():
 
     pipe = TrackingPipeline(TrackerConfig())
     rng = np.random.default_rng(4)
-    seen = rng.random(80) < 0.7
-    seen[:4] = seen[-1] = True
-    for k in range(2, 80):
-        seen[k] |= not (seen[k - 1] or seen[k - 2])
+    seen = _seen_7_in_10(rng, 80)
     for k in range(80):
         z = np.array([1000 + 50.0 * k, 500.0]) + rng.normal(0.0, SIGMA, 2) if seen[k] else ()
         z = np.asarray(z, dtype=float).reshape(-1, 2)
