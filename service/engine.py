@@ -51,7 +51,7 @@ from service.schemas import MAX_REORDER_WINDOW, BatchError, DetectionBatchIn, In
 from service.state_store import EngineCheckpoint, StateStore, restored_result
 from service.stats import Stats
 from service.viewers import ViewerHub
-from trackers.association.gating import max_eigenvalue_2x2
+from trackers.association.gating import position_noise
 from trackers.config import TrackerConfig
 from trackers.extended.tracker import ExtendedTracker, snapshot_of
 from trackers.formation.tracker import FormationTracker
@@ -936,7 +936,7 @@ class Engine:
             seen = (0, 0)
         if seen[0] < 0 or z.shape[0] < COV_MIN_DETECTIONS:
             return
-        sigma = float(np.median(np.sqrt(max_eigenvalue_2x2(R))))
+        sigma = position_noise(R) or 0.0  # not empty: COV_MIN_DETECTIONS or more
         span = float(np.hypot(*(z.max(axis=0) - z.min(axis=0))))
         judged, wide = seen[0] + 1, seen[1] + (sigma > span)
         if judged < COV_SAMPLE:

@@ -42,7 +42,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from trackers.association.gating import max_eigenvalue_2x2
+from trackers.association.gating import position_noise
 
 __all__ = [
     "CELL_SIGMAS",
@@ -174,8 +174,7 @@ class ClutterMap:
 
     @staticmethod
     def _cell_side(R: np.ndarray) -> float:
-        sigma = float(np.median(np.sqrt(max_eigenvalue_2x2(R))))
-        return max(MIN_CELL, CELL_SIGMAS * sigma)
+        return max(MIN_CELL, CELL_SIGMAS * (position_noise(R) or 0.0))  # R is never empty
 
     def density(self, sensor_id: str, z: np.ndarray, prior: float) -> np.ndarray:
         """``λ̂`` (per m²) at each of the positions ``z (n, 2)`` for the sensor's next scan,

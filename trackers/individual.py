@@ -434,8 +434,7 @@ class IndividualTracker:
         status = sequential_test(tracks.score, tracks.peak, tracks.confirmed, coast, tm)
         delete = status.delete
         delete[n_old:] = False  # a track is never deleted in the scan that starts or adopts it
-        if seen is not None:  # out of view: their scores stand, only coasting ends them
-            idle = np.flatnonzero(~seen)
+        if idle.size:  # out of view: their scores stand, only coasting ends them
             delete[idle] &= coast[idle] > tm.max_coast_time
         delete[:n_old] |= rivals  # tentative, so not among the deleted ids
         # Two detections say that a target is there, not how it moves: a pair whose slow and
@@ -1328,6 +1327,13 @@ def _group_velocities(z: np.ndarray, tracks: TrackArrays, init: InitiationConfig
     return out
 
 
+def _revisit(tracks: TrackArrays, pd: float) -> np.ndarray:
+    """``T̂ = P_D (t_updated − t_created) / (hits − 1)``: each track's sensor revisit as the
+    track saw it (its mean interval between detections, of which a fraction ``P_D`` are
+    detected)."""
+    return pd * (tracks.updated - tracks.created) / np.maximum(tracks.hits - 1, 1)
+
+
 def _coast_rate(
     tracks: TrackArrays, max_coast: float, pd: float, revisits: float | np.ndarray
 ) -> np.ndarray:
@@ -1341,10 +1347,8 @@ def _coast_rate(
     for the others. It is below 1 only where ``revisits`` revisits take longer than
     ``max_coast`` (a revisit over 4 s with the defaults and ``P_D`` 0.9, ``revisits`` 2.5),
     and then lets a track coast through that many revisits."""
-    hits = tracks.hits
-    revisit = pd * (tracks.updated - tracks.created) / np.maximum(hits - 1, 1)
-    known = tracks.confirmed & (hits >= COAST_MIN_HITS)
-    reach = np.where(known, revisits * revisit, 0.0)
+    known = tracks.confirmed & (tracks.hits >= COAST_MIN_HITS)
+    reach = np.where(known, revisits * _revisit(tracks, pd), 0.0)
     return np.minimum(1.0, max_coast / np.maximum(reach, max_coast))
 
 
@@ -1387,9 +1391,8 @@ def _looks(
     resolution cell, and detected within 1.5 revisits ``T̂`` (the track's, as in
     :func:`_coast_rate`): a target missed since counts its first miss only, and a sector of a
     revolution counts the tracks it detected a revolution before."""
-    hits = tracks.hits
-    revisit = pd * (tracks.updated - tracks.created) / np.maximum(hits - 1, 1)
-    look = tracks.confirmed & (hits >= LOOK_MIN_HITS) & (t - tracks.updated <= 1.5 * revisit)
+    look = tracks.confirmed & (tracks.hits >= LOOK_MIN_HITS)
+    look &= t - tracks.updated <= 1.5 * _revisit(tracks, pd)
     look &= masked >= 1.0
     if seen is not None:
         look &= seen
@@ -1436,10 +1439,8 @@ def _relinked(
     coasted on beside it, then deleted: the target changed id. A young track that is not
     confirmed yet must score 0 or more: in dense clutter three false alarms in a row fit a
     coasting track's wide prediction now and then."""
-    head = np.zeros(len(tracks), dtype=bool)
-    head[:n_old] = True
-    new = np.flatnonzero(young & head)
-    old = np.flatnonzero(tracks.confirmed & head & (tracks.updated < t))
+    new = np.flatnonzero(young[:n_old])
+    old = np.flatnonzero((tracks.confirmed & (tracks.updated < t))[:n_old])
     if new.size and old.size:  # only those lost before the youngest started
         old = old[tracks.updated[old] < tracks.created[new].max()]
     if new.size == 0 or old.size == 0:

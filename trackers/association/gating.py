@@ -21,7 +21,14 @@ import numpy as np
 
 from trackers.association.spatial import pairs_within
 
-__all__ = ["GatedPairs", "gate", "inverse_2x2", "log_gaussian_2d", "max_eigenvalue_2x2"]
+__all__ = [
+    "GatedPairs",
+    "gate",
+    "inverse_2x2",
+    "log_gaussian_2d",
+    "max_eigenvalue_2x2",
+    "position_noise",
+]
 
 _LOG_2PI = float(np.log(2.0 * np.pi))
 
@@ -47,6 +54,14 @@ def max_eigenvalue_2x2(A: np.ndarray) -> np.ndarray:
     λ_max = (a + d)/2 + sqrt(((a − d)/2)² + b²)."""
     a, b, d = A[..., 0, 0], A[..., 0, 1], A[..., 1, 1]
     return 0.5 * (a + d) + np.sqrt(0.25 * (a - d) ** 2 + b * b)
+
+
+def position_noise(R: np.ndarray) -> float | None:
+    """The position noise of a batch's detections: ``σ̃ = median_i sqrt(λ_max(R_i))`` (m) of
+    their covariances ``R (n, 2, 2)``; ``None`` for none."""
+    if len(R) == 0:
+        return None
+    return float(np.median(np.sqrt(max_eigenvalue_2x2(R))))
 
 
 def inverse_2x2(S: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -49,7 +49,7 @@ from typing import NamedTuple
 import numpy as np
 from scipy.spatial import cKDTree
 
-from trackers.association.gating import max_eigenvalue_2x2
+from trackers.association.gating import max_eigenvalue_2x2, position_noise
 from trackers.association.spatial import pairs_within
 from trackers.config import ExtendedConfig, TrackerConfig, TrackManagementConfig
 from trackers.coverage import Coverage
@@ -108,14 +108,6 @@ SPLIT_VELOCITY_STD = 10.0
 NOISE_MEMORY = 60.0
 #: ... and for at most this many sensors (the latest).
 NOISE_SENSORS = 64
-
-
-def position_noise(R: np.ndarray) -> float | None:
-    """The position noise of a batch's detections: ``σ̃ = median_i sqrt(λ_max(R_i))`` (m) of
-    their covariances ``R (n, 2, 2)``; ``None`` for none."""
-    if len(R) == 0:
-        return None
-    return float(np.median(np.sqrt(max_eigenvalue_2x2(R))))
 
 
 def remembered_noise(
