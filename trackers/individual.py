@@ -26,13 +26,13 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass, field, fields, replace
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
 from trackers.association.gating import gate, max_eigenvalue_2x2
 from trackers.association.gnn import gnn_assign
-from trackers.association.manoeuvre import ManoeuvreMatch, manoeuvre_search
+from trackers.association.manoeuvre import ManoeuvreMatch, manoeuvre_search, reaches_beyond
 from trackers.association.spatial import pairs_within
 from trackers.config import InitiationConfig, TrackerConfig
 from trackers.detection_rate import (
@@ -369,7 +369,7 @@ class IndividualTracker:
         range_rates = (0, 0)
         established = np.zeros(scan.size, dtype=bool)
         looks = detected = 0
-        lam_gated = np.zeros(0)
+        gated = (np.zeros(0, dtype=np.intp), np.zeros(0, dtype=np.intp))
         if len(tracks):
             pd = np.full(len(tracks), pd_sensor)
             if directives.pd:
@@ -387,12 +387,12 @@ class IndividualTracker:
                 searching = (t - pred.tracks.updated) * _coast_rate(
                     pred.tracks, tm.max_coast_time, pd_coast, MIN_MISSES - 0.5
                 ) <= tm.max_coast_time
-            tracks, claims, range_rates, established, lam_gated = self._update_existing(
+            tracks, claims, range_rates, established, gated = self._update_existing(
                 pred, scan, pd, lam_fa, seen, searching
             )
             look = _looks(pred.tracks, seen, masked, t, pd_coast)
-            looks = int(look.sum())
-            detected = int((look & (tracks.updated == t)).sum())
+            looks = int(np.count_nonzero(look))
+            detected = int(np.count_nonzero(look & (tracks.updated == t)))
             # dropped with the deleted tracks below; rivals out of view wait for a scan that
             # looks at them
             rivals = ~_best_of_each_origin(tracks)
@@ -406,8 +406,11 @@ class IndividualTracker:
         else:
             born = self._initiate(scan, claims == -np.inf, config, lam_fa, counters)
             candidates = Candidates.empty()
+        # The tracks born at this scan are neither tested nor deleted (2 detections, and
+        # the scan that starts a track never deletes it): they join the others at the end,
+        # after the tracks kept. Tracks handed back by peers (``adopt``) are tested with the
+        # old ones, never deleted at this scan either, and go after the births.
         n_old = len(tracks)
-        tracks = tracks.concat(born)
         if directives.adopt:
             tracks = tracks.concat(_adopted(directives.adopt, config, counters))
 
@@ -423,6 +426,7 @@ class IndividualTracker:
         if n_old and (longer or idle.size):
             revisits = np.full(len(tracks), reach)
             if longer:
+                lam_gated = _gated_densities(n_old, gated, lam_fa)
                 crowded = _crowded_gates(pred.Pc, scan, lam_fa, lam_gated, config.gating.threshold)
                 revisits[:n_old][crowded] = MIN_MISSES - 0.5
             if idle.size:
@@ -452,8 +456,9 @@ class IndividualTracker:
             tracks, young, delete = _relinked(tracks, young, delete, t, config, n_old)
             newly &= ~delete
         deleted_ids = renamed + tuple(tracks.ids[delete & tracks.confirmed].tolist())
-        tracks = replace(tracks, confirmed=newly | (tracks.confirmed & ~delete))
-        tracks = _frozen(tracks.take(~delete))
+        tracks = _frozen(
+            _kept(tracks, ~delete, confirmed=newly | tracks.confirmed, born=born, n_old=n_old)
+        )
 
         state = _State(
             config=config,
@@ -490,7 +495,7 @@ class IndividualTracker:
         lam_fa: float | np.ndarray,
         seen: np.ndarray | None,
         searching: np.ndarray | None,
-    ) -> tuple[TrackArrays, np.ndarray, tuple[int, int], np.ndarray, np.ndarray]:
+    ) -> tuple[TrackArrays, np.ndarray, tuple[int, int], np.ndarray, tuple[np.ndarray, np.ndarray]]:
         """The tracks updated with this scan (``pd`` the detection probability of each), and
         each detection's *claim* (``lam_fa`` the false-alarm density, one or one a detection):
         ``+inf`` where a confirmed track took it or has it in its
@@ -499,8 +504,8 @@ class IndividualTracker:
         takes no detection keeps its score: it was not missed, only not looked at. Last, the
         number of range-rates of the detections confirmed tracks took, and of those used
         (inside their gate), the detections taken by tracks of at least
-        :data:`ESTABLISHED_HITS` detections, and each track's highest false-alarm density
-        among the detections in its gate (NaN: none in it)."""
+        :data:`ESTABLISHED_HITS` detections, and the gated pairs (track and detection
+        indices)."""
         config, tracks = pred.config, pred.tracks
         x_pred, P_pred, c_bar, xc, Pc = pred.x_pred, pred.P_pred, pred.c_bar, pred.xc, pred.Pc
         pairs = gate(xc[:, :2], Pc[:, :2, :2], scan.z, scan.R, config.gating.threshold)
@@ -563,9 +568,7 @@ class IndividualTracker:
             score[at] = tracks.score[at] + hit
             hits[at] += 1
             updated[at] = scan.time
-            ids = scan.detection_ids
-            for i, j in zip(at.tolist(), ad.tolist(), strict=True):
-                det_ids[i] = () if ids[j] is None else (ids[j],)
+            det_ids[at] = _objects([() if i is None else (i,) for i in scan.detection_ids])[ad]
         x_comb, P_comb = imm_combine(x, P, mu)
         # A detection in a confirmed track's gate belongs to that target's neighbourhood: when
         # the track did not take it, it is far likelier clutter or a second detection of the
@@ -592,12 +595,7 @@ class IndividualTracker:
             updated=updated,
             detection_ids=det_ids,
         )
-        lam_gated = np.full(len(tracks), np.nan)
-        if ti.size:
-            lam_gated[:] = -np.inf
-            np.maximum.at(lam_gated, ti, np.broadcast_to(_at(lam_fa, dj), ti.shape))
-            lam_gated[np.isneginf(lam_gated)] = np.nan
-        return new, claims, range_rates, established, lam_gated
+        return new, claims, range_rates, established, (ti, dj)
 
     def _initiate_two_point(
         self,
@@ -677,23 +675,24 @@ class IndividualTracker:
             missed &= looked  # nor out of view
         score = np.where(missed, cand.score + float(miss_increment(pd)), cand.score)
         offered = cand.offered + missed
-        keep = score > tm.delete_threshold
+        keep = np.flatnonzero(score > tm.delete_threshold)
         idx = np.flatnonzero(claims == -np.inf)
         n = idx.size
         fresh_ids = _objects([scan.detection_ids[j] for j in idx.tolist()])
+        z_new = scan.z.take(idx, axis=0)
         candidates = Candidates(
-            z=np.concatenate([cand.z[keep], scan.z[idx]]),
-            R=np.concatenate([cand.R[keep], scan.R[idx]]),
-            time=np.concatenate([cand.time[keep], np.full(n, t)]),
+            z=np.concatenate([cand.z.take(keep, axis=0), z_new]),
+            R=np.concatenate([cand.R.take(keep, axis=0), scan.R.take(idx, axis=0)]),
+            time=np.concatenate([cand.time.take(keep), np.full(n, t)]),
             score=np.concatenate(
-                [score[keep], _initial_scores(tm.new_target_density, lam_fa, idx)]
+                [score.take(keep), _initial_scores(tm.new_target_density, lam_fa, idx)]
             ),
-            detection_ids=np.concatenate([cand.detection_ids[keep], fresh_ids]),
-            origin=np.concatenate([cand.origin[keep], counters.origins(n)]),
+            detection_ids=np.concatenate([cand.detection_ids.take(keep), fresh_ids]),
+            origin=np.concatenate([cand.origin.take(keep), counters.origins(n)]),
             group_velocity=np.concatenate(
-                [cand.group_velocity[keep], _group_velocities(scan.z[idx], tracks, init)]
+                [cand.group_velocity.take(keep, axis=0), _group_velocities(z_new, tracks, init)]
             ),
-            offered=np.concatenate([offered[keep], np.zeros(n, dtype=np.int64)]),
+            offered=np.concatenate([offered.take(keep), np.zeros(n, dtype=np.int64)]),
         )
         return born, candidates
 
@@ -954,6 +953,13 @@ def _remoded(tracks: TrackArrays, config: TrackerConfig) -> TrackArrays:
     )
 
 
+def _rows_of(values: Sequence[float], n: int) -> np.ndarray:
+    """An (n, len(values)) array whose every row is ``values``."""
+    out = np.empty((n, len(values)))
+    out[:] = values
+    return out
+
+
 def _new_tracks(
     config: TrackerConfig,
     scan: Scan,
@@ -990,7 +996,7 @@ def _new_tracks(
         ids=ids,
         x=np.repeat(x0[:, None, :], M, axis=1),
         P=np.repeat(P0[:, None, :, :], M, axis=1),
-        mu=np.tile(np.asarray(config.motion.initial_mode_probabilities), (n, 1)),
+        mu=_rows_of(config.motion.initial_mode_probabilities, n),
         x_comb=x0,
         P_comb=P0,
         score=np.asarray(score, dtype=float),
@@ -1004,11 +1010,36 @@ def _new_tracks(
     )
 
 
+def _kept(
+    tracks: TrackArrays,
+    keep: np.ndarray,
+    *,
+    confirmed: np.ndarray,
+    born: TrackArrays,
+    n_old: int,
+) -> TrackArrays:
+    """The rows ``keep`` (a mask) of ``tracks`` with the status ``confirmed`` (one a track of
+    ``tracks``), the tracks ``born`` after its first ``n_old`` rows: one pass over the fields
+    instead of a ``concat``, a ``replace`` and a ``take``."""
+    index = np.flatnonzero(keep)
+    cut = int(np.searchsorted(index, n_old))
+    head, tail = index[:cut], index[cut:]
+    whole = cut == n_old  # none of the first n_old rows goes
+    columns = {}
+    for k in TrackArrays.__dataclass_fields__:
+        v = confirmed if k == "confirmed" else getattr(tracks, k)
+        parts = [v[:n_old] if whole else v.take(head, axis=0), getattr(born, k)]
+        if tail.size:
+            parts.append(v.take(tail, axis=0))
+        columns[k] = np.concatenate(parts)
+    return TrackArrays(**columns)
+
+
 def _frozen(tracks: TrackArrays) -> TrackArrays:
     """``tracks`` with every array read-only: what the tracker keeps between scans cannot be
     changed through anything it hands out."""
-    for f in fields(tracks):
-        getattr(tracks, f.name).flags.writeable = False
+    for k in TrackArrays.__dataclass_fields__:
+        getattr(tracks, k).flags.writeable = False
     return tracks
 
 
@@ -1041,7 +1072,7 @@ def _adopted(
         ids=_objects([st.id for st in states]),
         x=np.repeat(x[:, None, :], M, axis=1),
         P=np.repeat(P[:, None, :, :], M, axis=1),
-        mu=np.tile(np.asarray(config.motion.initial_mode_probabilities), (n, 1)),
+        mu=_rows_of(config.motion.initial_mode_probabilities, n),
         x_comb=x,
         P_comb=P,
         score=score,
@@ -1157,6 +1188,12 @@ def _manoeuvre_found(
         lost &= seen
     lost[assigned] = False
     lost = np.flatnonzero(lost)
+    a_max, omega_max = config.gating.manoeuvre_acceleration, config.gating.manoeuvre_turn_rate
+    tau = scan.time - tracks.updated[lost]
+    # Most lost tracks' manoeuvres stay within their gates: the search's arrays are taken
+    # for the others only.
+    wide = reaches_beyond(pred.xc[lost], pred.Pc[lost], tau, a_max, omega_max)
+    lost, tau = lost[wide], tau[wide]
     free = np.ones(scan.size, dtype=bool)
     free[gated] = False
     free = np.flatnonzero(free)
@@ -1168,13 +1205,13 @@ def _manoeuvre_found(
         pred.c_bar[lost],
         pred.xc[lost],
         pred.Pc[lost],
-        scan.time - tracks.updated[lost],
+        tau,
         scan.z[free],
         scan.R[free],
         pd[lost],
         _at(lam_fa, free),
-        a_max=config.gating.manoeuvre_acceleration,
-        omega_max=config.gating.manoeuvre_turn_rate,
+        a_max=a_max,
+        omega_max=omega_max,
         straight_sojourn=config.motion.sojourn_times[0],
         gamma=config.gating.threshold,
     )
@@ -1357,6 +1394,20 @@ def _coast_rate(
 GATE_CLUTTER = 0.1
 
 
+def _gated_densities(
+    n: int, gated: tuple[np.ndarray, np.ndarray], lam_fa: float | np.ndarray
+) -> np.ndarray:
+    """Each of the ``n`` tracks' highest false-alarm density among the detections in its
+    gate (``gated``: the track and detection index of each gated pair; NaN: none in it)."""
+    ti, dj = gated
+    lam_gated = np.full(n, np.nan)
+    if ti.size:
+        lam_gated[:] = -np.inf
+        np.maximum.at(lam_gated, ti, np.broadcast_to(_at(lam_fa, dj), ti.shape))
+        lam_gated[np.isneginf(lam_gated)] = np.nan
+    return lam_gated
+
+
 def _crowded_gates(
     Pc: np.ndarray,
     scan: Scan,
@@ -1525,7 +1576,9 @@ def _best_of_each_origin(tracks: TrackArrays) -> np.ndarray:
     """Mask of the tracks to keep: every confirmed track, and of the tentative tracks that
     share an origin (rival starts from one detection) only the one with the highest score,
     unless a confirmed track of that origin exists."""
-    order, rank = sort_within_groups(tracks.origin, tracks.score, first=tracks.confirmed)
+    # (a confirmed track sorts first as a score of +inf: two sort keys instead of three)
+    ranked = np.where(tracks.confirmed, np.inf, tracks.score)
+    order, rank = sort_within_groups(tracks.origin, ranked)
     best = np.zeros(len(tracks), dtype=bool)
     best[order] = rank == 0
     return best | tracks.confirmed

@@ -222,7 +222,8 @@ def _score_pairs(
     q = np.array(q)
     det = s00 * s11 - s01 * s01
     cross = _TWO * s01 * d0 * d1
-    alpha = np.array(velocity_std**2) * dt**2 + q * dt**3 / _THREE
+    dt2 = dt * dt
+    alpha = dt2 * (np.array(velocity_std**2) + q * dt / _THREE)
     t00, t11 = s00 + alpha, s11 + alpha
     det_s = t00 * t11 - s01 * s01
     m2 = (t11 * d0 * d0 - cross + t00 * d1 * d1) / det_s
@@ -232,8 +233,7 @@ def _score_pairs(
     a_s = np.add(np.array(math.log(slow_fraction)), ll_s, out=T[_LS])
     a_f = np.add(np.array(math.log1p(-slow_fraction)), ll_f, out=T[_LF])
     if group_fraction <= 0.0:
-        top = np.maximum(a_s, a_f)
-        loglik = np.add(top, np.log(np.exp(a_s - top) + np.exp(a_f - top)), out=T[_LL])
+        loglik = np.logaddexp(a_s, a_f, out=T[_LL])
     else:
         grouped = np.isfinite(T[_G0]) & np.isfinite(T[_G1])
         g0, g1 = np.where(grouped, T[_G0], 0.0), np.where(grouped, T[_G1], 0.0)
@@ -313,13 +313,19 @@ def _mixed(
     velocity_std: float,
     q: float,
     group_velocity_std: float | None,
+    cols: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """:func:`_mixture_state` of the pairs of the scored table ``T`` (one column a pair):
-    of two components, or of three when the table was scored with group velocities
-    (``group_velocity_std`` given)."""
-    copies = (T, T) if group_velocity_std is None else (T, T, T)
+    """:func:`_mixture_state` of the pairs of the scored table ``T`` (one column a pair; or
+    its columns ``cols`` only): of two components, or of three when the table was scored
+    with group velocities (``group_velocity_std`` given)."""
+    m = 2 if group_velocity_std is None else 3
+    copies = (
+        np.concatenate((T,) * m, axis=1)
+        if cols is None
+        else T.take(np.concatenate((cols,) * m), axis=1)
+    )
     return _mixture_state(
-        np.concatenate(copies, axis=1),
+        copies,
         max_speed=max_speed,
         velocity_std=velocity_std,
         q=q,
@@ -592,7 +598,9 @@ def pair_candidates(
     if n_c == 0 or n_f == 0:
         return _no_pairs()
     zf, Rf = z.take(free_idx, axis=0), R.take(free_idx, axis=0)
-    floor = min_score if np.ndim(min_score) == 0 else np.asarray(min_score).take(free_idx)
+    # (isinstance first: np.ndim of a Python float costs as much as an array operation)
+    per_floor = isinstance(min_score, np.ndarray) and min_score.ndim > 0
+    floor = np.asarray(min_score).take(free_idx) if per_floor else min_score
     rival = None if rivals is None else np.asarray(rivals, dtype=float).take(free_idx)
     kw = dict(
         max_speed=max_speed,
@@ -614,7 +622,7 @@ def pair_candidates(
         group = dict(group_fraction=group_fraction, group_velocity_std=group_velocity_std)
     else:
         group = {}
-    if np.ndim(clutter_density) == 0:
+    if not (isinstance(clutter_density, np.ndarray) and clutter_density.ndim > 0):
         base = base + (math.log(pd) - math.log(clutter_density))
         per_detection = None
     else:  # −ln λ_fa of each free detection, added to each pair below
@@ -625,7 +633,7 @@ def pair_candidates(
         T = np.empty((_ROWS, n_c, n_f))
         np.subtract(zf[:, 0], cz[:, 0, None], out=T[_D0])
         np.subtract(zf[:, 1], cz[:, 1, None], out=T[_D1])
-        T[_J00 : _J11 + 1] = Rf.reshape(n_f, 4).T[[0, 1, 3], None]
+        T[_J00], T[_J01], T[_J11] = Rf[:, 0, 0], Rf[:, 0, 1], Rf[:, 1, 1]
         np.add(cR[:, 0, 0, None], T[_J00], out=T[_S00])
         np.add(cR[:, 0, 1, None], T[_J01], out=T[_S01])
         np.add(cR[:, 1, 1, None], T[_J11], out=T[_S11])
@@ -674,15 +682,15 @@ def pair_candidates(
     if ci.size > max_pairs:
         order = order[rank < max_pairs]
     ci, fj, cols = ci[order], fj[order], cols[order]
-    T = T.take(cols, axis=1)
-    x, P = _mixed(T, max_speed, velocity_std, q, group_velocity_std if grouped else None)
+    score = T[_SCORE].take(cols)
+    x, P = _mixed(T, max_speed, velocity_std, q, group_velocity_std if grouped else None, cols)
     x[:, :2] += cz.take(ci, axis=0)
     return TwoPointTracks(
         candidate=ci if n_c == dt_all.size else offered[ci],
         detection=free_idx[fj],
         x=x,
         P=P,
-        score=T[_SCORE, : ci.size],
+        score=score,
     )
 
 

@@ -26,7 +26,7 @@ class RowArrays:
                 return self
             index = np.flatnonzero(index)
         return type(self)(
-            **{k: np.take(getattr(self, k), index, axis=0) for k in self.__dataclass_fields__}
+            **{k: getattr(self, k).take(index, axis=0) for k in self.__dataclass_fields__}
         )
 
     def concat(self, other: Self) -> Self:

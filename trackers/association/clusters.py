@@ -43,7 +43,7 @@ def cluster_pairs(
     if track.size == 0:
         return PairClusters(np.zeros(0, dtype=np.intp), ())
     lone = lone_pairs(track, detection, n_tracks, n_dets)
-    singles = np.flatnonzero(lone)
+    singles = lone.nonzero()[0]
     rest = np.flatnonzero(~lone)
     if rest.size == 0:
         return PairClusters(singles, ())

@@ -42,8 +42,10 @@ def gnn_assign(
     rest = np.flatnonzero(~lone)
     if rest.size == 0:
         return worth
-    chosen = [np.flatnonzero(lone)]
-    if _count_distinct(track[rest]) * _count_distinct(detection[rest]) <= JOINT_CELLS:
+    chosen = [lone.nonzero()[0]]
+    # (each of the rest's tracks and detections is one of its pairs: few pairs, few cells)
+    few = rest.size * rest.size <= JOINT_CELLS
+    if few or _count_distinct(track[rest]) * _count_distinct(detection[rest]) <= JOINT_CELLS:
         groups: tuple[np.ndarray, ...] = (rest,)
     else:  # removing lone pairs leaves the others' degrees as they were: no singles here
         groups = tuple(

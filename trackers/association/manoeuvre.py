@@ -49,6 +49,7 @@ __all__ = [
     "ManoeuvreMatch",
     "manoeuvre_covariance",
     "manoeuvre_search",
+    "reaches_beyond",
 ]
 
 #: κ: the along-track acceleration's std as a fraction of the across-track one.
@@ -62,6 +63,21 @@ REACH_FRACTION = 0.5
 def _acceleration_bound(velocity: np.ndarray, a_max: float, omega_max: float) -> np.ndarray:
     """a(|v|) = min(a_max, ω_max |v|) for velocities (N, 2)."""
     return np.minimum(a_max, omega_max * np.hypot(velocity[:, 0], velocity[:, 1]))
+
+
+def reaches_beyond(
+    x_comb: np.ndarray, P_comb: np.ndarray, tau: np.ndarray, a_max: float, omega_max: float
+) -> np.ndarray:
+    """Mask of the tracks (``x_comb (N, 5)``, ``P_comb (N, 5, 5)``, ``τ`` since their last
+    update) whose manoeuvre reaches beyond their own uncertainty, which their gate searched
+    already: the across-track std ``a/√3 · τ²/2`` above ``REACH_FRACTION`` of the largest
+    predicted position std,
+
+        (a² / 3) (τ⁴ / 4) > REACH_FRACTION² λ_max(P_pos),   a = min(a_max, ω_max |v|).
+    """
+    a = _acceleration_bound(x_comb[:, 2:4], a_max, omega_max)
+    reach = (a * a / 3.0) * (tau**4 / 4.0)
+    return reach > REACH_FRACTION**2 * max_eigenvalue_2x2(P_comb[:, :2, :2])
 
 
 def manoeuvre_covariance(
@@ -130,9 +146,7 @@ def manoeuvre_search(
     # searched already: its across-track std, a/√3 · τ²/2, above half the largest predicted
     # position std. (Slow targets in the reference scenario never get there; the cut leaves
     # the mixed-speed scenarios' answers as they are and saves 4/5 of the search's time.)
-    a = _acceleration_bound(x_comb[:, 2:4], a_max, omega_max)
-    reach = (a * a / 3.0) * (tau**4 / 4.0)
-    wide = np.flatnonzero(reach > REACH_FRACTION**2 * max_eigenvalue_2x2(P_comb[:, :2, :2]))
+    wide = np.flatnonzero(reaches_beyond(x_comb, P_comb, tau, a_max, omega_max))
     if wide.size == 0:
         return None
     Q = manoeuvre_covariance(x_comb[wide, 2:4], tau[wide], a_max, omega_max)

@@ -21,6 +21,7 @@ public functions convert on the way in and out and return C-contiguous batch-maj
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Sequence
 
@@ -67,9 +68,14 @@ def transition_matrix(sojourn_times: Sequence[float], dt: float) -> np.ndarray:
     M = 1. ``Pi[i, j]`` is the probability of being in mode j now given mode i at the
     previous time; every row sums to 1. ``dt = 0`` gives the identity.
     """
-    # Plain floats: the IMM needs this every scan, for a handful of modes.
-    tau = [float(t) for t in np.asarray(sojourn_times, dtype=float).reshape(-1)]
-    dt = float(dt)
+    # Plain floats: the IMM needs this every scan, for a handful of modes, mostly at one
+    # revisit interval: the matrices are kept (read-only) for the last intervals asked.
+    tau = tuple(float(t) for t in np.asarray(sojourn_times, dtype=float).reshape(-1))
+    return _transition_matrix(tau, float(dt))
+
+
+@functools.lru_cache(maxsize=64)
+def _transition_matrix(tau: tuple[float, ...], dt: float) -> np.ndarray:
     if not tau:
         raise ValueError("sojourn_times: at least one mode")
     if not all(math.isfinite(t) and t > 0 for t in tau):
@@ -78,14 +84,18 @@ def transition_matrix(sojourn_times: Sequence[float], dt: float) -> np.ndarray:
         raise ValueError(f"dt: must be a finite number >= 0, got {dt!r}")
     M = len(tau)
     if M == 1:
-        return np.ones((1, 1))
+        out = np.ones((1, 1))
+        out.flags.writeable = False
+        return out
     rows = []
     for i, t in enumerate(tau):
         stay = math.exp(-dt / t)
         row = [(1.0 - stay) / (M - 1)] * M
         row[i] = stay
         rows.append(row)
-    return np.array(rows)
+    out = np.array(rows)
+    out.flags.writeable = False
+    return out
 
 
 def _add_spread(out: np.ndarray, tmp: np.ndarray, xs: np.ndarray, w: np.ndarray) -> None:
@@ -241,8 +251,12 @@ def imm_update(
     H = np.asarray(H, dtype=float)
     N, M, n = _check_shapes(x_pred, P_pred, c_bar)
     m = H.shape[0]
-    z = np.broadcast_to(np.asarray(z, dtype=float), (N, m))
-    R = np.broadcast_to(np.asarray(R, dtype=float), (N, m, m))
+    z = np.asarray(z, dtype=float)
+    R = np.asarray(R, dtype=float)
+    if z.shape != (N, m):  # (broadcast_to costs as much as the arithmetic: only when needed)
+        z = np.broadcast_to(z, (N, m))
+    if R.shape != (N, m, m):
+        R = np.broadcast_to(R, (N, m, m))
     x_out = np.empty((N, M, n))
     P_out = np.empty((N, M, n, n))
     mu_out = np.empty((N, M))

@@ -5,6 +5,7 @@ from trackers.association.manoeuvre import (
     ALONG_TRACK_FRACTION,
     manoeuvre_covariance,
     manoeuvre_search,
+    reaches_beyond,
 )
 from trackers.config import TrackerConfig
 from trackers.individual import IndividualTracker
@@ -126,3 +127,15 @@ def test_the_range_rate_of_a_detection_found_by_the_search_updates_the_track():
     assert set(_turning_target_ids(50.0, velocity_errors=plain)) == {("T1",)}
     assert set(_turning_target_ids(50.0, True, velocity_errors=doppler)) == {("T1",)}
     assert doppler[13][0] < 0.7 * plain[13][0], (doppler[13], plain[13])
+
+
+def test_reaches_beyond_compares_the_manoeuvre_with_the_track_uncertainty() -> None:
+    """(a²/3)(τ⁴/4) against REACH_FRACTION² λ_max: a 250 m/s aircraft (a = 25 m/s² with
+    ω_max 0.1) lost for 8 s has an across-track std of 460 m, beyond half its 100 m; a parked car
+    has none (a = 0), and the aircraft a second after its last detection 7 m."""
+    x = np.zeros((3, 5))
+    x[0, 2] = x[2, 2] = 250.0
+    P = np.tile(np.diag([100.0**2, 100.0**2, 25.0, 25.0, 1e-4]), (3, 1, 1))
+    tau = np.array([8.0, 8.0, 1.0])
+    out = reaches_beyond(x, P, tau, a_max=50.0, omega_max=0.1)
+    np.testing.assert_array_equal(out, [True, False, False])

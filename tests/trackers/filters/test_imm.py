@@ -54,6 +54,17 @@ def test_transition_matrix_values_and_rows() -> None:
     np.testing.assert_array_equal(transition_matrix([7.0, 3.0], 0.0), np.eye(2))
 
 
+def test_transition_matrix_is_kept_read_only() -> None:
+    """The matrices are cached per interval: a caller cannot change the next caller's."""
+    first = transition_matrix((30.0, 10.0), 4.0)
+    with pytest.raises(ValueError):
+        first[0, 0] = 0.5
+    again = transition_matrix(np.array([30.0, 10.0]), 4)
+    np.testing.assert_array_equal(again, first)
+    assert transition_matrix([30.0, 10.0], 4.5)[0, 0] == pytest.approx(math.exp(-4.5 / 30.0))
+    assert not transition_matrix([7.0], 3.0).flags.writeable
+
+
 @pytest.mark.parametrize("args", [([], 1.0), ([1.0, -2.0], 1.0), ([1.0, 2.0], -1.0)])
 def test_transition_matrix_rejects_bad_input(args: tuple[list[float], float]) -> None:
     with pytest.raises(ValueError):
