@@ -15,6 +15,7 @@ product of the numbers of tracks and detections.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -61,7 +62,10 @@ def position_noise(R: np.ndarray) -> float | None:
     their covariances ``R (n, 2, 2)``; ``None`` for none."""
     if len(R) == 0:
         return None
-    return float(np.median(np.sqrt(max_eigenvalue_2x2(R))))
+    # The median by a sort: np.median costs ten times more on a batch's few detections.
+    s = np.sort(max_eigenvalue_2x2(R))
+    n = s.size
+    return float(0.5 * (math.sqrt(s[(n - 1) // 2]) + math.sqrt(s[n // 2])))
 
 
 def inverse_2x2(S: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

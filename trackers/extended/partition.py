@@ -13,6 +13,7 @@ cost grows with the number of close pairs, not with the square of the number of 
 
 from __future__ import annotations
 
+import functools
 import math
 
 import numpy as np
@@ -63,11 +64,19 @@ def close_pairs(Z: np.ndarray, d_res: float) -> tuple[np.ndarray, np.ndarray]:
     if n <= BRUTE_FORCE_POINTS:  # every pair: cheaper than a k-d tree for a few points
         x, y = Z[:, 0], Z[:, 1]  # (columns: numpy reduces a length-2 axis slowly)
         dx, dy = x[:, None] - x[None, :], y[:, None] - y[None, :]
-        i, j = np.nonzero(dx * dx + dy * dy <= float(d_res) ** 2)
-        upper = i < j
-        return i[upper], j[upper]
+        close = dx * dx + dy * dy <= float(d_res) ** 2
+        close &= _upper_triangle(n)
+        return np.nonzero(close)
     pairs = cKDTree(Z).query_pairs(r=float(d_res), output_type="ndarray")
     return pairs[:, 0], pairs[:, 1]
+
+
+@functools.lru_cache(maxsize=BRUTE_FORCE_POINTS + 1)
+def _upper_triangle(n: int) -> np.ndarray:
+    """The (n, n) mask of the cells above the diagonal, ``i < j`` (read-only)."""
+    out = np.triu(np.ones((n, n), dtype=bool), 1)
+    out.flags.writeable = False
+    return out
 
 
 def pair_subsets(n: int, i: np.ndarray, j: np.ndarray, min_size: int = 1) -> list[np.ndarray]:

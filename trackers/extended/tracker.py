@@ -26,12 +26,20 @@ Each scan (:meth:`ExtendedTracker.propose`, then :meth:`~ExtendedTracker.commit`
    *resolution cell* (its extent ellipse with each semi-axis grown by half the resolution
    distance) gets detection probability ``in_cell_pd``, so its score follows eq. 28-30 with
    it; individual tracks inside the extent that move with the extended track are absorbed:
-   taken from the individual tracker and reported deleted.
+   taken from the individual tracker and reported deleted, unless they explain their
+   detections one to one (below): a car overtaken by a convoy or in a platoon stays a car.
 6. **Birth.** Detections claimed by no extended track form clusters (resolution distance).
-   A cluster of at least ``min_detections`` detections that are either explained by no
-   confirmed individual track or by confirmed tracks moving together, seen in
-   ``birth_scans`` scans in a row spanning at least ``birth_time`` seconds and moving
-   at no more than ``max_speed``, starts a tentative extended track.
+   Of each cluster, only the detections that confirmed individual tracks do not explain one
+   to one count: a connected set of confirmed tracks and the detections in their gates with
+   one or two detections and at least as many tracks is as many targets (cars 50 m apart in
+   a lane, or side by side in two lanes); more detections than tracks, or more than two
+   strung together gate to gate, are an object's returns (a ship's). A cluster of at least
+   ``min_detections`` such detections, seen in ``birth_scans`` scans in a row spanning at
+   least ``birth_time`` seconds and moving at no more than ``max_speed``, starts a tentative
+   extended track with those of them that are explained by no confirmed individual track or
+   by confirmed tracks moving together, less those of targets being acquired (a tentative
+   track of ``ESTABLISHED_HITS`` detections alone with its detection, or two such side by
+   side).
 
 Tracks can also be started by hand (:meth:`ExtendedTracker.start`), from a centroid,
 velocity and extent prior; such a track is confirmed at once.
@@ -55,6 +63,7 @@ from trackers.config import ExtendedConfig, TrackerConfig, TrackManagementConfig
 from trackers.coverage import Coverage
 from trackers.extended.partition import (
     close_pairs,
+    component_labels,
     pair_subsets,
     point_subsets,
 )
@@ -361,8 +370,10 @@ class _PointGates:
     spatial pre-gate of :func:`trackers.association.spatial.pairs_within`);
     :meth:`theirs` computes only the pairs it needs."""
 
-    def __init__(self, view: PointTrackView, scan: Scan) -> None:
-        self.rows = np.flatnonzero(view.confirmed)
+    def __init__(self, view: PointTrackView, scan: Scan, min_hits: int | None = None) -> None:
+        # min_hits: tentative tracks of that many detections or more are taken too
+        kept = view.confirmed if min_hits is None else view.confirmed | (view.hits >= min_hits)
+        self.rows = np.flatnonzero(kept)
         x = np.take(view.x, self.rows, axis=0)
         P = np.take(view.P, self.rows, axis=0)
         self.xy, self.v = x[:, :2], x[:, 2:4]
@@ -402,6 +413,59 @@ class _PointGates:
     @property
     def m(self) -> np.ndarray:
         return self._pairs[2]
+
+    @cached_property
+    def _sets(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The connected sets of tracks and the detections in their gates: for each gate
+        pair, its set's numbers of tracks and of detections; for each track, whether its set
+        holds at least as many tracks as detections. A pair whose detection and track are in
+        no other pair is a set of its own; only the others are labelled (every pair that
+        touches one of them shares a node of two pairs, so their sets hold nothing else)."""
+        det, trk = self.det, self.trk
+        n_trk = np.ones(det.size, dtype=np.intp)
+        n_det = np.ones(det.size, dtype=np.intp)
+        track_ok = np.ones(self.rows.size, dtype=bool)
+        if det.size:
+            shared = (np.bincount(det, minlength=self.size)[det] > 1) | (
+                np.bincount(trk, minlength=self.rows.size)[trk] > 1
+            )
+            if shared.any():
+                n_d = self.size  # nodes: the detections, then the tracks
+                d, k = det[shared], n_d + trk[shared]
+                labels = component_labels(n_d + self.rows.size, d, k)
+                used = np.zeros(labels.size, dtype=bool)
+                used[d] = used[k] = True
+                dets = np.bincount(labels[:n_d][used[:n_d]], minlength=labels.size)
+                trks = np.bincount(labels[n_d:][used[n_d:]], minlength=labels.size)
+                at = labels[d]
+                n_trk[shared], n_det[shared] = trks[at], dets[at]
+                own = labels[n_d:][used[n_d:]]
+                track_ok[used[n_d:]] = (trks[own] >= dets[own]) & (dets[own] <= 2)
+        return n_trk, n_det, track_ok
+
+    @property
+    def explained(self) -> np.ndarray:
+        """Mask of the gate pairs whose detections the tracks explain one to one: their
+        connected set (tracks joined by the detections in their gates) holds one or two
+        detections and at least as many tracks. Cars 50 m apart in a lane, or side by side
+        in two lanes, are as many targets as detections; a ship's returns are not, whether
+        more of them than its point tracks or as many but strung together gate to gate (4
+        returns along 200 m seen with 15 m of noise)."""
+        n_trk, n_det, _ = self._sets
+        return (n_trk >= n_det) & (n_det <= 2)
+
+    @property
+    def explained_tracks(self) -> np.ndarray:
+        """Mask of the tracks (``rows``) whose connected set is explained one to one
+        (:attr:`explained`); so is a track with no detection in its gate."""
+        return self._sets[2]
+
+    @property
+    def resolved(self) -> np.ndarray:
+        """Mask of the gate pairs explained one to one (:attr:`explained`) by exactly as
+        many tracks: a target, or two side by side, each with its track and no rival."""
+        n_trk, n_det, _ = self._sets
+        return (n_trk == n_det) & (n_det <= 2)
 
     @cached_property
     def _trace_Pp(self) -> np.ndarray:
@@ -714,7 +778,9 @@ class ExtendedTracker(SavesImmutableState):
         kept, merged = _merge(kept + spawned, cfg)
         deleted.extend(merged)
         step = t - state.time if state.time is not None and t > state.time else 0.0
-        kept, cells, take, seen = _hybridize(kept, view, dict(state.absorbing), step, t, cfg)
+        kept, cells, take, seen = _hybridize(
+            kept, view, dict(state.absorbing), step, t, cfg, point_gates
+        )
         absorbed = tuple(sorted(take))
         if absorbed:
             index = view.index()
@@ -728,7 +794,7 @@ class ExtendedTracker(SavesImmutableState):
             else tree.query_pairs(cfg.resolution_distance, output_type="ndarray")
         )
         born, candidates, next_id = self._births(
-            scan, claimed, pairs, point_gates, state, cfg, next_id, t
+            scan, view, claimed, pairs, point_gates, state, cfg, next_id, t
         )
         for _, rows in born:
             claimed[rows] = True
@@ -753,10 +819,11 @@ class ExtendedTracker(SavesImmutableState):
 
     # -- births --------------------------------------------------------------------------------
 
-    def _births(self, scan, claimed, pairs, point_gates, state, cfg, next_id, t):
-        """New tracks from the clusters of the unclaimed detections; ``pairs`` the pairs of the
-        scan's detections closer than the resolution distance (from the k-d tree the tracks
-        used), if known; ``cfg`` the configuration with the resolution distance in force."""
+    def _births(self, scan, view, claimed, pairs, point_gates, state, cfg, next_id, t):
+        """New tracks from the clusters of the unclaimed detections (module docstring, step
+        6); ``view`` the point tracks, ``pairs`` the pairs of the scan's detections closer
+        than the resolution distance (from the k-d tree the tracks used), if known; ``cfg``
+        the configuration with the resolution distance in force."""
         tm = state.management
         free = ~claimed
         if pairs is None and not claimed.any():
@@ -772,13 +839,23 @@ class ExtendedTracker(SavesImmutableState):
         # The clusters: the subsets of at least min_detections (≥ 2) free detections (rows
         # ascending, in order of their first row), as lists for their centroids on floats.
         subsets = pair_subsets(scan.size, i, j, max(2, cfg.min_detections))
+        if subsets:
+            # Only what a group may hold makes a run: the detections confirmed tracks
+            # explain are the individual targets' (a platoon of cars is no object, and a
+            # track lost for a scan or two does not start one either).
+            pg = point_gates()
+            if pg.det.size:
+                theirs = np.zeros(scan.size, dtype=bool)
+                theirs[pg.det[pg.explained]] = True
+                kept = [rows[~theirs[rows]] for rows in subsets]
+                subsets = [rows for rows in kept if rows.size >= max(2, cfg.min_detections)]
         clusters = [s.tolist() for s in subsets]
         centroids: list[tuple[float, float]] = []
-        if clusters:
-            zx, zy = scan.z[:, 0].tolist(), scan.z[:, 1].tolist()
-            for rows in clusters:
-                k = len(rows)
-                centroids.append((sum(zx[r] for r in rows) / k, sum(zy[r] for r in rows) / k))
+        if clusters:  # every cluster's mean at once: sums over the clusters' runs of rows
+            sizes = np.array([len(rows) for rows in clusters])
+            starts = np.concatenate(([0], np.cumsum(sizes[:-1])))
+            sums = np.add.reduceat(scan.z.take(np.concatenate(subsets), axis=0), starts, axis=0)
+            centroids = [(x, y) for x, y in (sums / sizes[:, None]).tolist()]
         # Each cluster's run: the candidate it continues (nearest to its prediction).
         match: list[_Candidate | None] = [None] * len(clusters)
         candidates: list[_Candidate] = []
@@ -821,6 +898,14 @@ class ExtendedTracker(SavesImmutableState):
         # again.
         since = np.array([run.first_time for _, run in ripe])
         kept = _group_clusters([rows for rows, _ in ripe], point_gates(), cfg, since)
+        # Nor those of targets being acquired: each with a track of ESTABLISHED_HITS
+        # detections or more, confirmed or not yet, alone or two side by side (cars
+        # entering a radar's view in a dense flow, whose tracks take a few scans to confirm).
+        acquiring = _PointGates(view, scan, ESTABLISHED_HITS)
+        if acquiring.det.size:
+            targets = np.zeros(scan.size, dtype=bool)
+            targets[acquiring.det[acquiring.resolved]] = True
+            kept = [rows[~targets[rows]] for rows in kept]
         for rows, (_, run) in zip(kept, ripe, strict=True):
             if rows.size < cfg.min_detections:
                 candidates.append(_Candidate.first(run.centroid, t))
@@ -844,6 +929,11 @@ class ExtendedTracker(SavesImmutableState):
             born.append((track, rows))
             next_id += 1
         return born, tuple(candidates), next_id
+
+
+#: A tentative track of this many detections is a target being acquired: a birth leaves its
+#: detection to it when it is resolved (:attr:`_PointGates.resolved`).
+ESTABLISHED_HITS = 3
 
 
 def _group_clusters(
@@ -1043,11 +1133,13 @@ def _hybridize(
     step: float,
     t: float,
     cfg: ExtendedConfig,
+    point_gates: Callable[[], _PointGates] | None = None,
 ) -> tuple[list[ExtendedTrack], tuple[ResolutionCell, ...], set[str], dict[str, int]]:
     """Resolution cells and absorbed individual tracks (module docstring, step 5). Returns
     the tracks (their visitors brought up to date), the cells of the confirmed ones, the ids
     of the individual tracks to take, and the confirmed ones seen moving with an extent
-    (scans in a row; ``before``: as of the last scan)."""
+    (scans in a row; ``before``: as of the last scan). A confirmed track that is a target of
+    its own (:attr:`_PointGates.explained_tracks` of ``point_gates``) is never absorbed."""
     cells: list[ResolutionCell] = []
     take: set[str] = set()
     seen: dict[str, int] = {}
@@ -1117,11 +1209,22 @@ def _hybridize(
                 continue
             if not confirmed:
                 take.add(tid)
+            elif _resolved(point_gates, i):
+                continue
             else:
                 seen[tid] = before.get(tid, 0) + 1
                 if seen[tid] >= ABSORB_SCANS:
                     take.add(tid)
     return tracks, tuple(cells), take, seen
+
+
+def _resolved(point_gates: Callable[[], _PointGates] | None, row: int) -> bool:
+    """Whether the confirmed track at ``row`` of the view is a target of its own."""
+    if point_gates is None:
+        return False
+    pg = point_gates()
+    k = int(np.searchsorted(pg.rows, row))
+    return bool(pg.explained_tracks[k])
 
 
 def _near_rows(view: PointTrackView, cx: float, cy: float, reach: float) -> list[int]:
