@@ -27,13 +27,14 @@ import threading
 import time
 from collections.abc import Callable
 from concurrent.futures import Future
+from dataclasses import replace
 from pathlib import Path
 from typing import Any, TypeVar
 
 import numpy as np
 
 from service.config_store import ConfigApplied, ConfigStore
-from service.convert import batch_to_scan, report_dict, track_to_dict
+from service.convert import batch_to_scan, dumps, empty_report, report_dict, track_to_dict
 from service.ingest import (
     IngestResult,
     Item,
@@ -62,6 +63,9 @@ from trackers.state import StateError
 from trackers.types import ScanRejected, StepResult, TrackSnapshot
 
 __all__ = ["CommandRefused", "Engine", "EngineUnavailable"]
+
+#: A batch refused as out of sequence by more than this (s) gets the reset hint in its detail.
+RESET_HINT_LAG = 10.0
 
 T = TypeVar("T")
 
@@ -213,7 +217,10 @@ class Engine:
             path=config_file,
         )
         self._applied_ingest = self._config.ingest
+        self._pipeline_factory = pipeline_factory
         self._pipeline = pipeline_factory(self._config.tracker)
+        #: confirmed tracks dropped by a reset, listed in the next report's ``deleted``
+        self._dropped: tuple[str, ...] = ()
         self.stats = stats or Stats("engine", queue_size)
         self.stats.queue_capacity = queue_size
         self._out = ReportOut(sink)
@@ -656,6 +663,43 @@ class Engine:
         :attr:`on_report`)."""
         return self._pipeline.point_states(ids)
 
+    def reset(self, *, timeout: float = 5.0) -> dict[str, Any]:
+        """Start again (``POST /api/v1/reset``). On the worker, after the batches queued
+        before it and those the reorder window holds: every track of every kind, the
+        two-point candidates, what was learned of each sensor (detection probability,
+        coverage, clutter map, usual interval, recent batches) and the tracks waiting to be
+        handed over are dropped, and the last processed time is forgotten, so that batches of
+        any time are taken again (a recording replayed from its start). The configuration,
+        the report ``seq`` and the counters stay; new ids start again from 1. The confirmed
+        tracks dropped are listed in the next Track report's ``deleted``. Answers
+        ``{"reset": true, "seq": n, "dropped": k}``, ``k`` the live tracks dropped.
+        Raises :class:`EngineUnavailable` like :meth:`call_in_worker`."""
+
+        def command(pipeline: TrackingPipeline) -> dict[str, Any]:
+            for held, batch in self._held.drain():
+                self._process(held, batch)
+            live = self._pipeline.snapshot()
+            self._dropped += tuple(t.id for t in live if t.confirmed)
+            self._pipeline = self._pipeline_factory(self._pipeline.config)
+            with self._hand_lock:
+                self._handed_in, self._handed_over = [], []
+            self._clocks = SensorClocks()
+            self._recent = RecentBatches()
+            self._last_wall = time.monotonic()
+            report = {**empty_report(), "seq": self._seq, "deleted": list(self._dropped)}
+            self._state = ReportState(report=report, data=dumps(report))
+            self.stats.tracks_confirmed = 0
+            self.view.publish(self._state)
+            if self._state_store is not None:
+                self._checkpoint = EngineCheckpoint(
+                    self._seq, self._pipeline.checkpoint(), "", self._last_wall
+                )
+                self._state_store.forget_saved()
+            log.info("reset: %d live tracks dropped, the time line forgotten", len(live))
+            return {"reset": True, "seq": self._seq, "dropped": len(live)}
+
+        return self.call_in_worker(command, timeout=timeout)
+
     def _take_handed(self) -> None:
         if not (self._handed_in or self._handed_over):
             return
@@ -973,6 +1017,9 @@ class Engine:
             t0 = time.perf_counter()
             result = pipeline.process(scan)
             ms = (time.perf_counter() - t0) * 1000.0
+            if self._dropped:  # the tracks a reset dropped: reported deleted now
+                result = replace(result, deleted=self._dropped + result.deleted)
+                self._dropped = ()
         except ScanRejected as exc:
             self._forget(item, batch)
             detail = exc.detail
@@ -989,6 +1036,11 @@ class Engine:
                         "; batches that reach the service later than others of their time are "
                         "taken in time order when ingest.reorder_window (now "
                         f"{self._applied_ingest.reorder_window:g} s) is at least that delay"
+                    )
+                if last - batch.time > RESET_HINT_LAG:
+                    detail += (
+                        "; a recording sent again from its start? POST /api/v1/reset (with the "
+                        "API token) drops the tracks and the last time, and starts again"
                     )
             self._refusals.reject(item, exc.reason, detail, batch)
             return

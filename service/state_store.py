@@ -262,6 +262,12 @@ class StateStore:
         )
         return figures
 
+    def forget_saved(self) -> None:
+        """Save the next checkpoint even under the ``seq`` saved last (a reset changed the
+        state between batches)."""
+        with self._save_lock:
+            self._saved_seq = None
+
     def save_logged(self, checkpoint: EngineCheckpoint | None) -> SaveFigures | None:
         """:meth:`save`, a failure logged instead of raised."""
         try:

@@ -4,7 +4,16 @@ from __future__ import annotations
 
 from fastapi import APIRouter
 
-from service.api import config, detections, extended, formation, health, patterns, tracks
+from service.api import (
+    config,
+    detections,
+    extended,
+    formation,
+    health,
+    patterns,
+    reset,
+    tracks,
+)
 
 __all__ = ["api_router"]
 
@@ -16,3 +25,4 @@ api_router.include_router(patterns.router, prefix="/api/v1")  # before /tracks/{
 api_router.include_router(tracks.router, prefix="/api/v1")
 api_router.include_router(detections.router, prefix="/api/v1")
 api_router.include_router(config.router, prefix="/api/v1")
+api_router.include_router(reset.router, prefix="/api/v1")
