@@ -8,7 +8,8 @@ Each scan (:meth:`ExtendedTracker.propose`, then :meth:`~ExtendedTracker.commit`
    ``group_speed_spread`` apart, beyond their uncertainty) is left to that track: a vehicle
    overtaking a convoy keeps its detections.
 3. **Gate and partition.** The other detections in the track's gate (``H P Hᵀ + z X + R``,
-   chi-square, ``gate_probability``) are split into subsets by the resolution distance
+   chi-square, ``gate_probability``), but for those likelier under another extended track's
+   gate (two groups passing each other), are split into subsets by the resolution distance
    (:mod:`.partition`); the nested unions of the subsets, best-fitting first, are scored by
 
        ΔL(W) = ln Poisson(|W|; γ) + ln f(W) − |W| ln λ_fa
@@ -678,9 +679,10 @@ class ExtendedTracker(SavesImmutableState):
         kept: list[ExtendedTrack] = []
         spawned: list[ExtendedTrack] = []
         deleted: list[str] = []
-        for track in state.tracks:
-            dt = max(0.0, t - track.time)
-            est = predict(track.estimate, dt, cfg.q, cfg.tau)
+        ests = [predict(tr.estimate, max(0.0, t - tr.time), cfg.q, cfg.tau) for tr in state.tracks]
+        owner = _owners(ests, scan, tree, R_mean, cfg) if tree is not None else None
+        for idx, track in enumerate(state.tracks):
+            est = ests[idx]
             if scan.coverage is not None and not _in_view(scan.coverage, est):
                 # Out of this sensor's view: not looked at, so not missed either.
                 if _dead(track, t, cfg, tm):
@@ -693,8 +695,10 @@ class ExtendedTracker(SavesImmutableState):
             points: dict[int, tuple[float, ...]] = {}
             inside: dict[int, float] | None = None
             if tree is not None:
+                # (a detection likelier under another extended track's gate is that one's)
+                taken = claimed if owner is None else claimed | ((owner >= 0) & (owner != idx))
                 subsets, points, inside = _gated_subsets(
-                    est, scan, tree, R_mean, claimed, point_gates, cfg, track
+                    est, scan, tree, R_mean, taken, point_gates, cfg, track
                 )
             gain, chosen, parts, left_out, fitted = _likeliest(
                 track, est, scan, subsets, points, cfg, log_lam, inside
@@ -987,6 +991,47 @@ def _group_clusters(
     drop = np.zeros(pg.size, dtype=bool)
     drop[det[~ok]] = True
     return [rows[~drop[rows]] for rows in clusters]
+
+
+def _owners(
+    ests: list[ExtendedEstimate],
+    scan: Scan,
+    tree: cKDTree,
+    R_mean: np.ndarray,
+    cfg: ExtendedConfig,
+) -> np.ndarray | None:
+    """For each detection in the gates of two extended tracks or more (predicted ``ests``),
+    the one under which it is likeliest, ``N(y; H x, H P Hᵀ + z X + R̄)``; −1 for the others.
+    ``None`` when no detection is in two gates. Two groups crossing (the two carriageways of a
+    motorway) then each keep their own detections, the nearer to their predicted centroid,
+    instead of the first one taking all of both and the other starving."""
+    if len(ests) < 2:
+        return None
+    best = np.full(scan.size, -np.inf)
+    owner = np.full(scan.size, -1, dtype=np.intp)
+    seen = np.zeros(scan.size, dtype=np.intp)
+    for i, est in enumerate(ests):
+        ga, gb, gc = innovation_entries(est, 1, R_mean, cfg.z_scale)
+        lam = 0.5 * (ga + gc) + _hypot(0.5 * (ga - gc), gb)
+        near = np.asarray(
+            tree.query_ball_point(est.x[:2], math.sqrt(cfg.gate_threshold * lam)), dtype=np.intp
+        )
+        if near.size == 0:
+            continue
+        e = np.take(scan.z, near, axis=0) - est.x[:2]
+        det = ga * gc - gb * gb
+        m = (gc * e[:, 0] ** 2 - 2.0 * gb * e[:, 0] * e[:, 1] + ga * e[:, 1] ** 2) / det
+        near, m = near[m <= cfg.gate_threshold], m[m <= cfg.gate_threshold]
+        ll = -0.5 * m - 0.5 * math.log(det)
+        seen[near] += 1
+        better = ll > best[near]
+        best[near[better]] = ll[better]
+        owner[near[better]] = i
+    shared = seen >= 2
+    if not shared.any():
+        return None
+    owner[~shared] = -1
+    return owner
 
 
 def _gated_subsets(
