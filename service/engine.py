@@ -217,8 +217,8 @@ class Engine:
             path=config_file,
         )
         self._applied_ingest = self._config.ingest
-        self._pipeline_factory = pipeline_factory
         self._pipeline = pipeline_factory(self._config.tracker)
+        self._resets = 0  # resets so far (checkpoints carry it: the state file saves each)
         #: confirmed tracks dropped by a reset, listed in the next report's ``deleted``
         self._dropped: tuple[str, ...] = ()
         self.stats = stats or Stats("engine", queue_size)
@@ -670,8 +670,9 @@ class Engine:
         coverage, clutter map, usual interval, recent batches) and the tracks waiting to be
         handed over are dropped, and the last processed time is forgotten, so that batches of
         any time are taken again (a recording replayed from its start). The configuration,
-        the report ``seq`` and the counters stay; new ids start again from 1. The confirmed
-        tracks dropped are listed in the next Track report's ``deleted``. Answers
+        the report ``seq``, the counters and the id counters stay (new ids go on from the
+        last). The confirmed tracks dropped are listed in the next Track report's
+        ``deleted``, and in the latest report's until then. Answers
         ``{"reset": true, "seq": n, "dropped": k}``, ``k`` the live tracks dropped.
         Raises :class:`EngineUnavailable` like :meth:`call_in_worker`."""
 
@@ -680,7 +681,8 @@ class Engine:
                 self._process(held, batch)
             live = self._pipeline.snapshot()
             self._dropped += tuple(t.id for t in live if t.confirmed)
-            self._pipeline = self._pipeline_factory(self._pipeline.config)
+            self._pipeline.reset()
+            self._resets += 1
             with self._hand_lock:
                 self._handed_in, self._handed_over = [], []
             self._clocks = SensorClocks()
@@ -692,9 +694,8 @@ class Engine:
             self.view.publish(self._state)
             if self._state_store is not None:
                 self._checkpoint = EngineCheckpoint(
-                    self._seq, self._pipeline.checkpoint(), "", self._last_wall
+                    self._seq, self._pipeline.checkpoint(), "", self._last_wall, self._resets
                 )
-                self._state_store.forget_saved()
             log.info("reset: %d live tracks dropped, the time line forgotten", len(live))
             return {"reset": True, "seq": self._seq, "dropped": len(live)}
 
@@ -721,9 +722,10 @@ class Engine:
         confirmed_snaps = tuple(t for t in tracks if t.confirmed)
         if old is not None:
             t, sensor_id, deleted = old.time, old.sensor_id, old.deleted
-        else:  # no batch yet: the time of the tracks started by hand
+        else:  # no batch yet (or since a reset): the time of the tracks started by hand
             before = prev.report.get("time")
-            t, sensor_id, deleted = (at if before is None else max(before, at)), "", ()
+            t, sensor_id = (at if before is None else max(before, at)), ""
+            deleted = self._dropped  # a reset's, until the next batch reports them
 
         def snapshot(confirmed_only: bool) -> tuple[TrackSnapshot, ...]:
             return confirmed_snaps if confirmed_only else tracks
@@ -1063,7 +1065,7 @@ class Engine:
         self._state = state
         if self._state_store is not None:
             self._checkpoint = EngineCheckpoint(
-                seq, pipeline.checkpoint(), result.sensor_id, self._last_wall
+                seq, pipeline.checkpoint(), result.sensor_id, self._last_wall, self._resets
             )
         self.stats.processed(seq, result.time, len(batch.detections), ms, len(confirmed))
         self._out.tracks(state.data)

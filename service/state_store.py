@@ -46,6 +46,8 @@ class EngineCheckpoint:
     pipeline: PipelineCheckpoint
     sensor_id: str | None
     processed_at: float
+    #: resets of the engine before it (a reset changes the state under the same ``seq``)
+    resets: int = 0
 
 
 @dataclass(frozen=True)
@@ -147,7 +149,7 @@ class StateStore:
         self.max_age = float(max_age)
         self.save_interval = float(save_interval)
         self._wall = wall_clock
-        self._saved_seq: int | None = None
+        self._saved: tuple[int, int] | None = None  # (seq, resets) of the state on file
         self._save_lock = threading.Lock()
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
@@ -200,7 +202,7 @@ class StateStore:
             pipeline.import_state(state)
         except StateError as exc:
             raise _NotUsed(str(exc)) from None
-        self._saved_seq = seq
+        self._saved = (seq, 0)
         values = state.point.values
         kinds = Counter(t.kind for t in pipeline.snapshot())
         log.info(
@@ -225,7 +227,7 @@ class StateStore:
         ``OSError`` or :class:`~trackers.state.StateError` when it cannot; the old file is
         then left as it was."""
         with self._save_lock:
-            if checkpoint is None or checkpoint.seq == self._saved_seq:
+            if checkpoint is None or (checkpoint.seq, checkpoint.resets) == self._saved:
                 return None
             t0 = time.perf_counter()
             state = checkpoint.pipeline.export()
@@ -241,7 +243,7 @@ class StateStore:
             t2 = time.perf_counter()
             atomic_write(self.path, data)
             t3 = time.perf_counter()
-            self._saved_seq = checkpoint.seq
+            self._saved = (checkpoint.seq, checkpoint.resets)
             figures = SaveFigures(
                 seq=checkpoint.seq,
                 size=len(data),
@@ -261,12 +263,6 @@ class StateStore:
             figures.write_ms,
         )
         return figures
-
-    def forget_saved(self) -> None:
-        """Save the next checkpoint even under the ``seq`` saved last (a reset changed the
-        state between batches)."""
-        with self._save_lock:
-            self._saved_seq = None
 
     def save_logged(self, checkpoint: EngineCheckpoint | None) -> SaveFigures | None:
         """:meth:`save`, a failure logged instead of raised."""

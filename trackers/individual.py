@@ -335,6 +335,23 @@ class IndividualTracker:
         self._version += 1
         self._prediction = None
 
+    def reset(self) -> None:
+        """Drop every track, the two-point candidates and the learned detection
+        probabilities, and forget the last time; the configuration and the id counters stay
+        (new ids go on from the last one given)."""
+        st = self._state
+        self._state = _State(
+            config=st.config,
+            models=st.models,
+            tracks=_frozen(TrackArrays.empty(len(st.models))),
+            candidates=Candidates.empty(),
+            time=None,
+            next_id=st.next_id,
+            next_origin=st.next_origin,
+        )
+        self._version += 1
+        self._prediction = None
+
     def propose(self, scan: Scan, directives: PointDirectives | None = None) -> PointProposal:
         """The step for ``scan`` under the peers' ``directives``, without changing the tracker."""
         directives = directives or PointDirectives()

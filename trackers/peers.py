@@ -210,6 +210,11 @@ class PeerTracker(Protocol):
 
     def reconfigure(self, config: TrackerConfig) -> None: ...
 
+    def reset(self) -> None:
+        """Drop every track and what was learned, keeping the configuration and the id
+        counter (:meth:`trackers.pipeline.TrackingPipeline.reset`)."""
+        ...
+
 
 class StateCheckpoint(Protocol):
     """A tracker's state as it was at one moment, turned into plain data later, on any
@@ -273,6 +278,16 @@ class SavesImmutableState:
     def import_state(self, section: StateSection) -> None:
         self.restore_state(self.check_state(section))
 
+    #: The fields of ``self._state`` that :meth:`reset` keeps (the configuration and the id
+    #: counter); the others go back to their defaults.
+    _kept_on_reset: tuple[str, ...] = ()
+
+    def reset(self) -> None:
+        """Drop every track and what was learned; the configuration and the id counter stay,
+        so new ids go on from the last one given."""
+        st = self._state
+        self._state = type(st)(**{k: getattr(st, k) for k in self._kept_on_reset})
+
 
 @dataclass(frozen=True)
 class PointDirectives:
@@ -321,6 +336,11 @@ class PointTracker(Protocol):
     def commit(self, proposal: PointProposal) -> None: ...
 
     def snapshot(self, confirmed_only: bool = False) -> tuple[TrackSnapshot, ...]: ...
+
+    def reset(self) -> None:
+        """Drop every track and what was learned, keeping the configuration and the id
+        counters."""
+        ...
 
 
 def check_proposal(kind: str, proposal: object, scan: Scan, view: PointTrackView) -> None:

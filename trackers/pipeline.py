@@ -257,6 +257,19 @@ class TrackingPipeline:
         for peer in self.peers:
             peer.reconfigure(config)
 
+    def reset(self) -> None:
+        """Start again: every tracker drops its tracks and what it learned, the hand-overs
+        waiting are dropped, the learned coverage and clutter map too, and the last processed
+        time is forgotten (scans of any time are taken again). The configuration and the id
+        counters stay: new ids go on from the last one given."""
+        for tracker in (self.point, *self.peers):
+            tracker.reset()
+        self._last_time = None
+        self._hand_in.clear()
+        self._hand_over.clear()
+        self._coverage = CoverageLearner()
+        self._clutter = ClutterMap()
+
     # -- hand-over between trackers of neighbouring sectors ---------------------------------
 
     def hand_in(self, states: Sequence[PointTrackState]) -> None:

@@ -28,8 +28,9 @@ _DESCRIPTION = (
     "coverage, clutter map, usual interval, recent batches) are dropped, and the last "
     "processed time is forgotten, so that batches of any time are taken again (a recording "
     "replayed from its start, which would otherwise be refused as `out_of_sequence`). The "
-    "configuration, the report `seq` and the counters stay; new track ids start again from "
-    "1, and the next Track report lists the confirmed tracks dropped in `deleted`. With a "
+    "configuration, the report `seq`, the counters and the id counters stay (new ids go on "
+    "from the last one given), and the next Track report lists the confirmed tracks dropped "
+    "in `deleted`. With a "
     "state file, the empty state is what the next save writes.\\n\\n"
     '**200** `{"reset": true, "seq": n, "dropped": k}` (`k` live tracks dropped); '
     "**401** without the token; **503** when the tracker's worker is not running or did not "

@@ -400,3 +400,24 @@ def test_a_rejected_scan_keeps_the_hand_over_for_the_next():
         east.process(scan_at(5.0, []))  # out of sequence
     east.process(scan_at(12.0, []))
     assert [s.id for s in east.snapshot()] == [states[0].id]
+
+
+def test_a_reset_drops_the_tracks_and_the_time_and_ids_go_on() -> None:
+    """``reset``: no track of any kind, scans of any time taken again, and new ids after the
+    last one given (a dropped id never comes back)."""
+    from clients.scenarios.multitarget import reference_scenario, simulate
+
+    scans = [s.to_scan() for s in simulate(reference_scenario(1))]
+    p = TrackingPipeline.all_kinds()
+    for scan in scans[:10]:
+        p.process(scan)
+    before = {t.id for t in p.snapshot()}
+    assert before and p.last_time == scans[9].time
+    p.reset()
+    assert p.snapshot() == () and p.last_time is None
+    for scan in scans[:10]:
+        p.process(scan)
+    after = {t.id for t in p.snapshot()}
+    assert after and not after & before
+    last = max(int(i[1:]) for i in before if i.startswith("T"))
+    assert min(int(i[1:]) for i in after if i.startswith("T")) > last

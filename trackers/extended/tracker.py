@@ -28,7 +28,8 @@ Each scan (:meth:`ExtendedTracker.propose`, then :meth:`~ExtendedTracker.commit`
    distance) gets detection probability ``in_cell_pd``, so its score follows eq. 28-30 with
    it; individual tracks inside the extent that move with the extended track are absorbed:
    taken from the individual tracker and reported deleted, unless they explain their
-   detections one to one (below): a car overtaken by a convoy or in a platoon stays a car.
+   detections one to one (below; those its own detections started are absorbed still): a
+   car overtaken by a convoy or in a platoon stays a car.
 6. **Birth.** Detections claimed by no extended track form clusters (resolution distance).
    Of each cluster, only the detections that confirmed individual tracks do not explain one
    to one count: a connected set of confirmed tracks and the detections in their gates with
@@ -418,14 +419,16 @@ class _PointGates:
     @cached_property
     def _sets(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The connected sets of tracks and the detections in their gates: for each gate
-        pair, its set's numbers of tracks and of detections; for each track, whether its set
-        holds at least as many tracks as detections. A pair whose detection and track are in
-        no other pair is a set of its own; only the others are labelled (every pair that
-        touches one of them shares a node of two pairs, so their sets hold nothing else)."""
+        pair, its set's numbers of tracks and of detections; for each track, whether it has a
+        detection in its gate and its set is explained one to one. A pair whose detection and
+        track are in no other pair is a set of its own; only the others are labelled (every
+        pair that touches one of them shares a node of two pairs, so their sets hold nothing
+        else)."""
         det, trk = self.det, self.trk
         n_trk = np.ones(det.size, dtype=np.intp)
         n_det = np.ones(det.size, dtype=np.intp)
-        track_ok = np.ones(self.rows.size, dtype=bool)
+        track_ok = np.zeros(self.rows.size, dtype=bool)  # a track with no detection: no
+        track_ok[trk] = True
         if det.size:
             shared = (np.bincount(det, minlength=self.size)[det] > 1) | (
                 np.bincount(trk, minlength=self.rows.size)[trk] > 1
@@ -457,8 +460,8 @@ class _PointGates:
 
     @property
     def explained_tracks(self) -> np.ndarray:
-        """Mask of the tracks (``rows``) whose connected set is explained one to one
-        (:attr:`explained`); so is a track with no detection in its gate."""
+        """Mask of the tracks (``rows``) with a detection in their gate whose connected set
+        is explained one to one (:attr:`explained`)."""
         return self._sets[2]
 
     @property
@@ -555,6 +558,7 @@ class ExtendedTracker(SavesImmutableState):
 
     kind = "extended"
     _checkpoint_type = ExtendedCheckpoint
+    _kept_on_reset = ("config", "management", "next_id")
     _read_state = staticmethod(read_state)
 
     def __init__(self, config: TrackerConfig | None = None, *, id_prefix: str = "") -> None:
@@ -1183,8 +1187,9 @@ def _hybridize(
     """Resolution cells and absorbed individual tracks (module docstring, step 5). Returns
     the tracks (their visitors brought up to date), the cells of the confirmed ones, the ids
     of the individual tracks to take, and the confirmed ones seen moving with an extent
-    (scans in a row; ``before``: as of the last scan). A confirmed track that is a target of
-    its own (:attr:`_PointGates.explained_tracks` of ``point_gates``) is never absorbed."""
+    (scans in a row; ``before``: as of the last scan). A confirmed track moving with it that
+    explains its detection one to one (:attr:`_PointGates.explained_tracks` of
+    ``point_gates``) is not absorbed; those its own detections started are."""
     cells: list[ResolutionCell] = []
     take: set[str] = set()
     seen: dict[str, int] = {}

@@ -323,6 +323,7 @@ class FormationTracker(SavesImmutableState):
 
     kind = KIND
     _checkpoint_type = FormationCheckpoint
+    _kept_on_reset = ("config", "next_id")
     _read_state = staticmethod(read_state)
 
     def __init__(self, config: TrackerConfig | None = None, *, id_prefix: str = "") -> None:

@@ -432,6 +432,7 @@ class PatternTracker(SavesImmutableState):
 
     kind = "point_patterns"
     _checkpoint_type = PatternCheckpoint
+    _kept_on_reset = ("config", "management", "modes", "hybrid", "next_id")
     _read_state = staticmethod(read_state)
 
     def __init__(self, config: TrackerConfig | None = None, *, id_prefix: str = "") -> None:
