@@ -679,9 +679,9 @@ class Engine:
         def command(pipeline: TrackingPipeline) -> dict[str, Any]:
             for held, batch in self._held.drain():
                 self._process(held, batch)
-            live = self._pipeline.snapshot()
+            live = pipeline.snapshot()
             self._dropped += tuple(t.id for t in live if t.confirmed)
-            self._pipeline.reset()
+            pipeline.reset()
             self._resets += 1
             with self._hand_lock:
                 self._handed_in, self._handed_over = [], []
@@ -694,7 +694,7 @@ class Engine:
             self.view.publish(self._state)
             if self._state_store is not None:
                 self._checkpoint = EngineCheckpoint(
-                    self._seq, self._pipeline.checkpoint(), "", self._last_wall, self._resets
+                    self._seq, pipeline.checkpoint(), "", self._last_wall, self._resets
                 )
             log.info("reset: %d live tracks dropped, the time line forgotten", len(live))
             return {"reset": True, "seq": self._seq, "dropped": len(live)}

@@ -59,7 +59,7 @@ from typing import NamedTuple
 import numpy as np
 from scipy.spatial import cKDTree
 
-from trackers.association.gating import max_eigenvalue_2x2, position_noise
+from trackers.association.gating import log_gaussian_2d, max_eigenvalue_2x2, position_noise
 from trackers.association.spatial import pairs_within
 from trackers.config import ExtendedConfig, TrackerConfig, TrackManagementConfig
 from trackers.coverage import Coverage
@@ -363,6 +363,12 @@ def _hypot(x: float, y: float) -> float:
     return float(np.hypot(x, y))
 
 
+def _one_to_one(n_trk: np.ndarray, n_det: np.ndarray) -> np.ndarray:
+    """Whether connected sets of ``n_trk`` tracks and ``n_det`` detections are explained one
+    to one: one or two detections, and at least as many tracks."""
+    return (n_trk >= n_det) & (n_det <= 2)
+
+
 class _PointGates:
     """The confirmed individual tracks of a scan (``rows`` of the view; ``xy``, ``v`` and
     their covariances ``Pp``, ``Pv``; ``created``) with the 99 % gates in which they keep a
@@ -444,7 +450,7 @@ class _PointGates:
                 at = labels[d]
                 n_trk[shared], n_det[shared] = trks[at], dets[at]
                 own = labels[n_d:][used[n_d:]]
-                track_ok[used[n_d:]] = (trks[own] >= dets[own]) & (dets[own] <= 2)
+                track_ok[used[n_d:]] = _one_to_one(trks[own], dets[own])
         return n_trk, n_det, track_ok
 
     @property
@@ -456,7 +462,7 @@ class _PointGates:
         more of them than its point tracks or as many but strung together gate to gate (4
         returns along 200 m seen with 15 m of noise)."""
         n_trk, n_det, _ = self._sets
-        return (n_trk >= n_det) & (n_det <= 2)
+        return _one_to_one(n_trk, n_det)
 
     @property
     def explained_tracks(self) -> np.ndarray:
@@ -469,7 +475,13 @@ class _PointGates:
         """Mask of the gate pairs explained one to one (:attr:`explained`) by exactly as
         many tracks: a target, or two side by side, each with its track and no rival."""
         n_trk, n_det, _ = self._sets
-        return (n_trk == n_det) & (n_det <= 2)
+        return _one_to_one(n_trk, n_det) & (n_trk == n_det)
+
+    def detections(self, pairs: np.ndarray) -> np.ndarray:
+        """Mask of the scan's detections in the gate ``pairs`` (a mask over the pairs)."""
+        out = np.zeros(self.size, dtype=bool)
+        out[self.det[pairs]] = True
+        return out
 
     @cached_property
     def _trace_Pp(self) -> np.ndarray:
@@ -853,8 +865,7 @@ class ExtendedTracker(SavesImmutableState):
             # track lost for a scan or two does not start one either).
             pg = point_gates()
             if pg.det.size:
-                theirs = np.zeros(scan.size, dtype=bool)
-                theirs[pg.det[pg.explained]] = True
+                theirs = pg.detections(pg.explained)
                 kept = [rows[~theirs[rows]] for rows in subsets]
                 subsets = [rows for rows in kept if rows.size >= max(2, cfg.min_detections)]
         clusters = [s.tolist() for s in subsets]
@@ -911,8 +922,7 @@ class ExtendedTracker(SavesImmutableState):
         # entering a radar's view in a dense flow, whose tracks take a few scans to confirm).
         acquiring = _PointGates(view, scan, ESTABLISHED_HITS)
         if acquiring.det.size:
-            targets = np.zeros(scan.size, dtype=bool)
-            targets[acquiring.det[acquiring.resolved]] = True
+            targets = acquiring.detections(acquiring.resolved)
             kept = [rows[~targets[rows]] for rows in kept]
         for rows, (_, run) in zip(kept, ripe, strict=True):
             if rows.size < cfg.min_detections:
@@ -997,6 +1007,12 @@ def _group_clusters(
     return [rows[~drop[rows]] for rows in clusters]
 
 
+def _gate_radius(ga: float, gb: float, gc: float, cfg: ExtendedConfig) -> float:
+    """The radius of a gate ``mᵀ S⁻¹ m ≤ gate_threshold`` with ``S = [[ga, gb], [gb, gc]]``:
+    ``√(γ λ_max(S))``."""
+    return math.sqrt(cfg.gate_threshold * (0.5 * (ga + gc) + _hypot(0.5 * (ga - gc), gb)))
+
+
 def _owners(
     ests: list[ExtendedEstimate],
     scan: Scan,
@@ -1016,17 +1032,16 @@ def _owners(
     seen = np.zeros(scan.size, dtype=np.intp)
     for i, est in enumerate(ests):
         ga, gb, gc = innovation_entries(est, 1, R_mean, cfg.z_scale)
-        lam = 0.5 * (ga + gc) + _hypot(0.5 * (ga - gc), gb)
         near = np.asarray(
-            tree.query_ball_point(est.x[:2], math.sqrt(cfg.gate_threshold * lam)), dtype=np.intp
+            tree.query_ball_point(est.x[:2], _gate_radius(ga, gb, gc, cfg)), dtype=np.intp
         )
         if near.size == 0:
             continue
-        e = np.take(scan.z, near, axis=0) - est.x[:2]
-        det = ga * gc - gb * gb
-        m = (gc * e[:, 0] ** 2 - 2.0 * gb * e[:, 0] * e[:, 1] + ga * e[:, 1] ** 2) / det
-        near, m = near[m <= cfg.gate_threshold], m[m <= cfg.gate_threshold]
-        ll = -0.5 * m - 0.5 * math.log(det)
+        m, ll = log_gaussian_2d(
+            np.take(scan.z, near, axis=0) - est.x[:2], np.array([[ga, gb], [gb, gc]])
+        )
+        inside = m <= cfg.gate_threshold
+        near, ll = near[inside], ll[inside]
         seen[near] += 1
         better = ll > best[near]
         best[near[better]] = ll[better]
@@ -1061,7 +1076,7 @@ def _gated_subsets(
     gate when the gate's radius (with ``R̄``) is less than the resolution distance (else
     None)."""
     ga, gb, gc = innovation_entries(est, 1, R_mean, cfg.z_scale)  # H P Hᵀ + z X + R̄
-    radius = math.sqrt(cfg.gate_threshold * (0.5 * (ga + gc) + _hypot(0.5 * (ga - gc), gb)))
+    radius = _gate_radius(ga, gb, gc, cfg)
     c0, c1, v0, v1 = est.x.tolist()
     reach = 1.5 * radius + cfg.resolution_distance
     near = np.asarray(tree.query_ball_point((c0, c1), reach), dtype=np.intp)
