@@ -113,7 +113,7 @@ class MotionConfig:
         2.0, "acceleration noise PSD of the coordinated-turn mode, m²/s³", gt=0, le=1e4
     )
     q_turn_rate: float = _field(
-        1e-4, "turn-rate noise PSD of the coordinated-turn mode, rad²/s³", gt=0, le=1.0
+        3e-5, "turn-rate noise PSD of the coordinated-turn mode, rad²/s³", gt=0, le=1.0
     )
     cv_turn_rate_std: float = _field(
         0.05,
@@ -124,7 +124,7 @@ class MotionConfig:
         le=10.0,
     )
     sojourn_times: tuple[float, ...] = _field(
-        (30.0, 10.0), "mean time spent in each mode, s (one per model)", gt=0, le=1e6, length=(1, 2)
+        (60.0, 20.0), "mean time spent in each mode, s (one per model)", gt=0, le=1e6, length=(1, 2)
     )
     initial_mode_probabilities: tuple[float, ...] = _field(
         (0.9, 0.1),
