@@ -916,13 +916,17 @@ class ExtendedTracker(SavesImmutableState):
         # a point tracker takes for targets) hold nothing back. A run left with too few starts
         # again.
         since = np.array([run.first_time for _, run in ripe])
-        kept = _group_clusters([rows for rows, _ in ripe], point_gates(), cfg, since)
+        moving = (
+            np.array([run.slope() for _, run in ripe]),
+            np.array([run.velocity_std(0.5 * cfg.resolution_distance) for _, run in ripe]),
+        )
+        kept = _group_clusters([rows for rows, _ in ripe], point_gates(), cfg, since, moving)
         # Nor those of targets being acquired: each with a track of ESTABLISHED_HITS
         # detections or more, confirmed or not yet, alone or two side by side (cars
         # entering a radar's view in a dense flow, whose tracks take a few scans to confirm).
         acquiring = _PointGates(view, scan, ESTABLISHED_HITS)
         if acquiring.det.size:
-            targets = acquiring.detections(acquiring.resolved)
+            targets = acquiring.detections(acquiring.explained)
             kept = [rows[~targets[rows]] for rows in kept]
         for rows, (_, run) in zip(kept, ripe, strict=True):
             if rows.size < cfg.min_detections:
@@ -959,13 +963,18 @@ def _group_clusters(
     pg: _PointGates,
     cfg: ExtendedConfig,
     since: np.ndarray | None = None,
+    moving: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> list[np.ndarray]:
     """The detections of each cluster (rows of the scan) that a group may hold: those no
     confirmed individual track explains, and those of confirmed tracks that move together
     (within ``group_speed_spread`` of the median velocity of the cluster's tracks, two
     tracks at least). With ``since`` (one time per cluster), a track created since explains
     that cluster's detections only if it is resolved (its gate holds one detection, which no
-    other gate holds). All clusters at once, in array operations."""
+    other gate holds). With ``moving`` (each cluster's run velocity ``(K, 2)`` and its std
+    ``(K,)``), tracks that move together move with their cluster too: within
+    ``group_speed_spread`` plus twice that std of the run's velocity (cars of the other
+    carriageway that pass a cluster of cars move together, but not with it). All clusters at
+    once, in array operations."""
     if pg.det.size == 0:
         return clusters
     K, m = len(clusters), pg.rows.size
@@ -998,6 +1007,10 @@ def _group_clusters(
         sv = v[np.lexsort((v[:, axis], uc)), axis]
         median[has, axis] = 0.5 * (sv[lo[has]] + sv[hi[has]])
     near = np.hypot(*(v - np.take(median, uc, axis=0)).T) <= cfg.group_speed_spread
+    if moving is not None:
+        run_v, run_sd = moving
+        off = np.hypot(*(v - np.take(run_v, uc, axis=0)).T)
+        near &= off <= cfg.group_speed_spread + 2.0 * np.take(run_sd, uc)
     near &= np.bincount(uc, weights=near, minlength=K)[uc] >= 2
     ok = near[np.searchsorted(uniq, key)]
     if ok.all():

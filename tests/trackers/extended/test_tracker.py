@@ -294,6 +294,26 @@ def test_a_birth_cluster_keeps_tracks_moving_together_and_leaves_the_others_thei
     assert a.tolist() == [0, 1, 2, 3, 6]
 
 
+def test_tracks_moving_together_against_their_clusters_run_are_not_its_group():
+    """A newcomer's motorway: two confirmed cars of the other carriageway (30 m/s west) pass
+    a cluster whose run moves 30 m/s east (run velocity std 5 m/s). They move together, but
+    not with the run: their detections are theirs. Moving with it (east), they are the group's.
+    """
+    from trackers.extended.tracker import _group_clusters, _PointGates
+
+    xy = np.array([[0, 0], [60, 0]], dtype=float)
+    z = np.vstack([xy + 3.0, [[120.0, 0.0], [180.0, 0.0], [240.0, 0.0]]])
+    scan = Scan("s", 0.0, z, np.tile(R, (len(z), 1, 1)))
+    cluster = [np.arange(5)]
+    run = (np.array([[30.0, 0.0]]), np.array([5.0]))
+    west = _PointGates(_view_of(xy, np.array([[-30.0, 0], [-29.0, 0]]), [True, True]), scan)
+    east = _PointGates(_view_of(xy, np.array([[29.0, 0], [30.0, 0]]), [True, True]), scan)
+    cfg = TrackerConfig().extended
+    assert _group_clusters(cluster, west, cfg)[0].tolist() == [0, 1, 2, 3, 4]  # (no run)
+    assert _group_clusters(cluster, west, cfg, None, run)[0].tolist() == [2, 3, 4]
+    assert _group_clusters(cluster, east, cfg, None, run)[0].tolist() == [0, 1, 2, 3, 4]
+
+
 def test_gate_sets_tell_targets_explained_one_to_one_from_an_objects_returns():
     """Sets of confirmed tracks joined by the detections in their gates (10 m of noise,
     99 % gates of about 45 m): a lone track with its detection, two tracks side by side with
