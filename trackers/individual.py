@@ -1231,6 +1231,7 @@ def _manoeuvre_found(
         omega_max=omega_max,
         straight_sojourn=config.motion.sojourn_times[0],
         gamma=config.gating.threshold,
+        max_speed=config.initiation.max_speed,
     )
     if found is None:
         return None

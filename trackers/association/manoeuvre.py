@@ -101,6 +101,42 @@ def manoeuvre_covariance(
     return Q
 
 
+def _speed_kept(
+    x: np.ndarray,
+    mu: np.ndarray,
+    x_comb: np.ndarray,
+    P_comb: np.ndarray,
+    tau: np.ndarray,
+    a_max: float,
+    omega_max: float,
+    max_speed: float,
+) -> np.ndarray:
+    """Mask of the updated pairs (IMM posteriors ``x (K, M, 5)``, ``mu (K, M)``) whose speed
+    stays within three standard deviations of the track's (``x_comb``, ``P_comb`` before,
+    ``τ`` since its last update) under the manoeuvre's along-track part and at most
+    ``max_speed``::
+
+        | |v⁺| − |v⁻| | ≤ 3 σ_s,   σ_s² = (κ a τ)² / 3 + uᵀ P_v u,   |v⁺| ≤ v_max + 3 σ_s,
+
+    ``v⁺ = Σ_j μ_j v_j`` the combined velocity after the update, ``u`` the unit vector along
+    ``v⁻`` (``uᵀ P_v u``: the variance of the speed; the turn rate's uncertainty widens
+    ``P_v`` across the track, in direction, by hundreds of m/s after 20 s of coasting at
+    450 m/s), ``a = min(a_max, ω_max |v⁻|)``.
+    A turn at constant speed passes (90° in 20 s by a 236 m/s aircraft: about +75 m/s from
+    the Gaussian update against 3 σ_s ≈ 165 m/s); a false alarm 6 km across it does not."""
+    v_new = np.einsum("km,kmi->ki", mu, x[:, :, 2:4])
+    v_old = x_comb[:, 2:4]
+    before = np.hypot(v_old[:, 0], v_old[:, 1])
+    u = v_old / np.where(before > 0, before, 1.0)[:, None]
+    a = _acceleration_bound(v_old, a_max, omega_max)
+    var = (ALONG_TRACK_FRACTION * a * tau) ** 2 / 3.0 + np.einsum(
+        "ki,kij,kj->k", u, P_comb[:, 2:4, 2:4], u
+    )
+    speed = np.hypot(v_new[:, 0], v_new[:, 1])
+    change = speed - before
+    return (change * change <= 9.0 * var) & (speed <= max_speed + 3.0 * np.sqrt(var))
+
+
 @dataclass(frozen=True)
 class ManoeuvreMatch:
     """The pairs taken: ``track`` (indices into the tracks searched for), ``detection``, and
@@ -131,14 +167,16 @@ def manoeuvre_search(
     omega_max: float,
     straight_sojourn: float,
     gamma: float,
+    max_speed: float = np.inf,
 ) -> ManoeuvreMatch | None:
     """Tracks (predicted mode states ``x_pred (N, M, 5)``, ``P_pred``, ``c_bar (N, M)``, their
     combination ``x_comb (N, 5)``, ``P_comb``, time since the last update ``tau``, detection
     probability ``pd (N,)``) matched to detections ``z (n, 2)``, ``R (n, 2, 2)`` (false-alarm
     density ``clutter_density``, one number or one per detection) under the
     manoeuvre hypothesis: the chi-square gate ``γ`` on ``P_comb + Q_m``, the gain
-    ``G = hit + ln p_m − ln(1 − P_D)`` and GNN over the positive gains (module docstring).
-    None when nothing is taken."""
+    ``G = hit + ln p_m − ln(1 − P_D)`` and GNN over the positive gains (module docstring),
+    among the pairs whose updated speed is kept (:func:`_speed_kept`) and at most
+    ``max_speed``. None when nothing is taken."""
     N = x_comb.shape[0]
     if N == 0 or z.shape[0] == 0 or a_max <= 0:
         return None
@@ -173,6 +211,11 @@ def manoeuvre_search(
     )
     with np.errstate(divide="ignore"):
         hit = hit_increment(pd[ti], loglik, lam[dj]) + np.log(p_m)
+    # A turn keeps the speed: a detection that only a change of speed beyond the along-track
+    # part of the manoeuvre reaches (a false alarm kilometres across the track of an
+    # aircraft coasting through two misses) is no manoeuvre of this target.
+    keep = _speed_kept(x, mu, x_comb[ti], P_comb[ti], tau[ti], a_max, omega_max, max_speed)
+    ti, dj, x, P, mu, hit = ti[keep], dj[keep], x[keep], P[keep], mu[keep], hit[keep]
     sel = gnn_assign(ti, dj, hit - miss_increment(pd[ti]), N, z.shape[0])
     if sel.size == 0:
         return None

@@ -43,10 +43,10 @@ def _one_track(speed):
     return x, P, np.array([[0.9, 0.1]]), x[:, 0], P[:, 0]
 
 
-def _search(speed, z, clutter_density):
+def _search(speed, z, clutter_density, tau=4.0):
     x, P, c_bar, xc, Pc = _one_track(speed)
     return manoeuvre_search(
-        x, P, c_bar, xc, Pc, np.array([4.0]), np.asarray(z, float),
+        x, P, c_bar, xc, Pc, np.array([tau]), np.asarray(z, float),
         np.tile(400.0 * np.eye(2), (len(z), 1, 1)), np.array([0.9]), clutter_density,
         a_max=50.0, omega_max=0.1, straight_sojourn=30.0, gamma=18.4,
     )  # fmt: skip
@@ -72,6 +72,20 @@ def test_search_takes_nothing_along_the_track_in_dense_clutter_or_when_slow():
 #: 30/10 s sojourn times and below 0 with 60/20 s (a turn's onset half as likely a priori),
 #: a knife's edge these tests are not about.
 CLUTTER = 1e-10
+
+
+def test_search_keeps_the_speed_of_a_turn_and_refuses_a_false_alarm_km_across():
+    """A 236 m/s aircraft coasting 20 s (two misses at a 10 s revisit), the straight-line
+    prediction at the origin. A 90° turn at 0.0785 rad/s puts it 1715 m short and 3005 m
+    across: taken (the update's speed stays within the along-track allowance). A false alarm
+    6 km across is as likely under the manoeuvre's Gaussian (2.2 sigma across) but asks the
+    speed to double: refused, even in clutter this sparse (a newcomer's ATC radar, where such
+    a track went on at 1,000-2,000 m/s)."""
+    turn = _search(236.0, [[-1715.0, 3005.0]], 1e-12, tau=20.0)
+    assert turn is not None and turn.detection.tolist() == [0]
+    speed = np.hypot(*np.einsum("km,kmi->ki", turn.mu, turn.x[:, :, 2:4])[0])
+    assert 236.0 < speed < 236.0 + 165.0
+    assert _search(236.0, [[0.0, 6000.0]], 1e-12, tau=20.0) is None
 
 
 def _turning_target_ids(a_max, range_rates=False, velocity_errors=None):
