@@ -45,6 +45,8 @@ LOOK_MIN_HITS = 5
 PRIOR_LOOKS = 10.0
 #: Each scan of a sensor keeps this fraction of its past looks (a memory of about 50 scans).
 FADE = 0.98
+#: Weight of the old mean interval between a sensor's scans against the newest interval.
+INTERVAL_FADE = 0.8
 #: At most this many sensors are remembered (the least recently heard goes first).
 MAX_SENSORS = 256
 
@@ -68,11 +70,13 @@ def coast_revisits(pd: float, beta: float) -> float:
 
 @dataclass(frozen=True)
 class SensorRate:
-    """One sensor's faded looks and detections, and the time of its last scan."""
+    """One sensor's faded looks and detections, the time of its last scan and the faded mean
+    interval between its scans (NaN until its second scan)."""
 
     time: float
     looks: float = 0.0
     detected: float = 0.0
+    interval: float = math.nan
 
     def estimate(self, prior: float) -> float:
         """P̂_D = (detected + w₀ P_D,0) / (looks + w₀)."""
@@ -93,6 +97,15 @@ class DetectionRates:
         rate = self.sensors.get(sensor_id)
         return prior if rate is None else rate.estimate(prior)
 
+    def interval(self, sensor_id: str) -> float:
+        """The faded mean interval between the sensor's scans (s); 0 while unknown. A radar
+        that sends its whole scan as one batch: its revisit; one that sends it by sectors:
+        less (a lower bound of the revisit either way)."""
+        rate = self.sensors.get(sensor_id)
+        if rate is None or math.isnan(rate.interval):
+            return 0.0
+        return rate.interval
+
     def lowest(self, prior: float) -> float:
         """The lowest learned ``P_D`` of all sensors, and ``prior``'s: the most lenient
         coasting limit, for a track out of the view of the sensor at hand."""
@@ -107,7 +120,17 @@ class DetectionRates:
         if old is None:
             new = SensorRate(time, float(looks), float(detected))
         else:
-            new = SensorRate(time, FADE * old.looks + looks, FADE * old.detected + detected)
+            step = time - old.time
+            interval = old.interval
+            if step > 0:
+                interval = (
+                    step
+                    if math.isnan(interval)
+                    else INTERVAL_FADE * interval + (1.0 - INTERVAL_FADE) * step
+                )
+            new = SensorRate(
+                time, FADE * old.looks + looks, FADE * old.detected + detected, interval
+            )
         sensors = {k: v for k, v in self.sensors.items() if k != sensor_id}
         sensors[sensor_id] = new  # the most recently heard last
         while len(sensors) > MAX_SENSORS:

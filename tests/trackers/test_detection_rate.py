@@ -61,6 +61,16 @@ def test_a_scan_without_looks_fades_the_counts_and_records_its_time():
     assert (r.time, r.looks, r.detected) == (1.0, 10 * FADE, 5 * FADE)
 
 
+def test_the_interval_between_a_sensors_scans_is_learned():
+    rates = DetectionRates().learned("r", 0.0, 1, 1)
+    assert rates.interval("r") == 0.0 and rates.interval("other") == 0.0  # unknown yet
+    rates = rates.learned("r", 10.0, 1, 1).learned("r", 20.0, 1, 1)
+    assert rates.interval("r") == pytest.approx(10.0)
+    # a longer gap moves the faded mean a fifth of the way; a repeated time leaves it
+    rates = rates.learned("r", 40.0, 1, 1).learned("r", 40.0, 1, 1)
+    assert rates.interval("r") == pytest.approx(0.8 * 10.0 + 0.2 * 20.0)
+
+
 @pytest.mark.parametrize(("looks", "detected"), [(3, 4), (2, -1)])
 def test_impossible_counts_are_refused(looks, detected):
     with pytest.raises(ValueError, match="detected"):

@@ -107,16 +107,31 @@ def test_confirmed_track_is_deleted_after_drop_from_peak_and_reported():
 
 
 def test_max_coast_time_deletes():
+    tr = IndividualTracker(config(pd=0.9, clutter_density=1e-6, max_coast_time=3.5))
+    for k in range(10):
+        res = tr.step(scan_at(k, [0.0, 0.0], pd=0.9))
+    assert res.confirmed()
+    for k in range(10, 15):
+        res = tr.step(scan_at(k, np.zeros((0, 2)), pd=0.9))
+        if res.deleted:
+            break
+    # last update at 9; three misses cost 6.9, less than the drop from the peak that deletes,
+    # and 2.5 revisits of 1 s are less than 3.5 s, so max_coast_time decides: 13 − 9 = 4 > 3.5
+    assert k == 13
+
+
+def test_a_sensor_that_rarely_detects_lets_its_tracks_coast_its_revisits():
+    """P_D 0.2 stated at a 1 s revisit: misses in a row are likely, and a track may coast
+    for 9.5 revisits (9.5 s), more than max_coast_time 3.5 s. (Before the sensor's interval
+    bounded its revisit, the track's own reading, 0.2 · 1 s, let it coast 1.9 s only.)"""
     tr = IndividualTracker(config(pd=0.2, clutter_density=1e-6, max_coast_time=3.5))
     for k in range(10):
         res = tr.step(scan_at(k, [0.0, 0.0], pd=0.2))
     assert res.confirmed()
-    for k in range(10, 15):
-        res = tr.step(scan_at(k, np.zeros((0, 2)), pd=0.2))
-        if res.deleted:
+    for k in range(10, 25):
+        if tr.step(scan_at(k, np.zeros((0, 2)), pd=0.2)).deleted:
             break
-    # last update at 9; misses cost only ln(0.8), so coasting decides: 13 − 9 = 4 > 3.5
-    assert k == 13
+    assert k - 9 == 10  # deleted at its 10th second of coasting
 
 
 @pytest.mark.parametrize(("revisit", "pd"), [(10.0, 0.9), (1.0, 0.5)])
@@ -140,6 +155,23 @@ def test_a_slow_sensors_track_coasts_through_two_missed_revisits(revisit, pd):
     assert deleted == [tid]
     # T = 10 s: through two missed revisits (20 s), not three; T = 1 s: 10 s, as before
     assert at == (30.0 if revisit == 10.0 else 11.0)
+
+
+def test_a_track_seen_more_often_than_pd_coasts_its_sensors_revisits():
+    """A newcomer's en-route radar (T = 10 s, P_D 0.85 stated: 3.14 revisits): a track seen 16
+    times in a row read its revisit as 0.85 · 10 = 8.5 s and was deleted at its third miss
+    (30 s > 3.14 · 8.5 s). The mean interval between the sensor's batches bounds the revisit
+    from below: deleted at the fourth miss."""
+    tr = IndividualTracker(TrackerConfig())
+    truth = lambda k: np.array([1000.0 + 2000.0 * k, 500.0])  # noqa: E731 (200 m/s)
+    rng = np.random.default_rng(3)
+    for k in range(16):
+        res = tr.step(scan_at(10.0 * k, truth(k) + rng.normal(0.0, SIGMA, 2), pd=0.85))
+    (tid,) = [t.id for t in res.confirmed()]
+    for k in range(16, 21):
+        if tid in tr.step(scan_at(10.0 * k, np.zeros((0, 2)), pd=0.85)).deleted:
+            break
+    assert k - 15 == 4  # misses in a row when deleted
 
 
 def _seen_7_in_10(rng, scans):
