@@ -308,9 +308,9 @@ class TrackManagementConfig:
     ``ln((1 − β)/α)`` and the deletion threshold ``ln(β/(1 − α))`` with α =
     ``p_false_confirm`` and β = ``p_true_delete``. A confirmed track is also deleted when its
     score falls ``delete_drop_from_peak`` below its peak, or when it has had no detection for
-    ``max_coast_time`` seconds, or, once confirmed with 5 detections, ``m* − ½`` revisits of
-    its sensor if that is longer (a GMTI every 10 s misses a vehicle twice in a row now and
-    then), ``m*`` the misses in a row whose probability ``(1 − P_D)^m*`` is β: 2.5 revisits
+    ``max_coast_time`` seconds, or ``m* − ½`` revisits of its sensor if that is longer (a
+    GMTI every 10 s misses a vehicle twice in a row now and then), ``m*`` the misses in a
+    row whose probability ``(1 − P_D)^m*`` is β: 2.5 revisits
     at ``P_D`` 0.9, 3.8 at 0.8, 5.2 at 0.7 (at most 9.5), ``P_D`` the batch's or, when it
     states none, the one the sensor's tracks show (:mod:`trackers.detection_rate`); past 2.5
     revisits only while the track's gate expects fewer than 0.1 false alarms. Time spent
@@ -339,8 +339,8 @@ class TrackManagementConfig:
     )
     max_coast_time: float = _field(
         10.0,
-        "a confirmed track is deleted after this long without a detection, s (or, once it has "
-        "5 detections, if longer, as many revisits of its sensor as make that many misses in "
+        "a confirmed track is deleted after this long without a detection, s (or, if longer, "
+        "as many revisits of its sensor as make that many misses in "
         "a row as unlikely as p_true_delete: 2.5 at P_D 0.9, 5.2 at 0.7, P_D learned from the "
         "sensor's tracks when its batches state none; inside an extended track's resolution "
         "cell the time counts at the rate extended.in_cell_pd / pd)",

@@ -47,6 +47,9 @@ PRIOR_LOOKS = 10.0
 FADE = 0.98
 #: Weight of the old mean interval between a sensor's scans against the newest interval.
 INTERVAL_FADE = 0.8
+#: A new interval counts as at most this many times the mean (a sensor silent for an hour
+#: does not make its revisit an hour long).
+MAX_INTERVAL_STEP = 3.0
 #: At most this many sensors are remembered (the least recently heard goes first).
 MAX_SENSORS = 256
 
@@ -122,12 +125,11 @@ class DetectionRates:
         else:
             step = time - old.time
             interval = old.interval
-            if step > 0:
-                interval = (
-                    step
-                    if math.isnan(interval)
-                    else INTERVAL_FADE * interval + (1.0 - INTERVAL_FADE) * step
-                )
+            if step > 0 and math.isnan(interval):
+                interval = step
+            elif step > 0:  # a gap (an outage) counts as at most MAX_INTERVAL_STEP intervals
+                step = min(step, MAX_INTERVAL_STEP * interval)
+                interval = INTERVAL_FADE * interval + (1.0 - INTERVAL_FADE) * step
             new = SensorRate(
                 time, FADE * old.looks + looks, FADE * old.detected + detected, interval
             )

@@ -402,7 +402,11 @@ class IndividualTracker:
             searching = None
             if longer:
                 searching = (t - pred.tracks.updated) * _coast_rate(
-                    pred.tracks, tm.max_coast_time, pd_coast, MIN_MISSES - 0.5
+                    pred.tracks,
+                    tm.max_coast_time,
+                    pd_coast,
+                    MIN_MISSES - 0.5,
+                    rates.interval(scan.sensor_id),
                 ) <= tm.max_coast_time
             tracks, claims, range_rates, established, gated = self._update_existing(
                 pred, scan, pd, lam_fa, seen, searching
@@ -1402,19 +1406,26 @@ def _coast_rate(
 
         min(1, T_coast / (revisits · T̂)),   T̂ = max(P_D (t_updated − t_created) / (hits − 1), T_s),
 
-    ``T̂`` its sensor's revisit: as the track saw it (its mean interval between detections,
-    of which a fraction ``P_D`` are detected; for confirmed tracks of at least
-    :data:`COAST_MIN_HITS` detections, as a false track's few hits say little of a revisit),
-    and at least the mean interval ``T_s`` between the scan's sensor's batches (0 while
-    unknown), for every confirmed track. The track's own estimate alone falls short of the
-    revisit when the track happened to be detected more often than ``P_D``: at a 10 s revisit
-    and ``P_D`` 0.85, 3.1 revisits, a track seen 16 times in a row was deleted at its third
-    miss (30 s, beyond 3.1 · 8.5 s). The rate is 1 for the other tracks; it is below 1 only
-    where ``revisits`` revisits take longer than ``max_coast`` (a revisit over 4 s with the
+    ``T̂`` its sensor's revisit: as the track saw it (its mean interval between detections
+    ``Δ̄ = (t_updated − t_created) / (hits − 1)``, of which a fraction ``P_D`` are detected;
+    for confirmed tracks of at least :data:`COAST_MIN_HITS` detections, as a false track's
+    few hits say little of a revisit), and, for every confirmed track, at least the mean
+    interval ``T_s`` between the scan's sensor's batches (0 while unknown) up to ``Δ̄``:
+
+        T̂ = max(P_D Δ̄, min(T_s, Δ̄)).
+
+    The track's own reading alone falls short of the revisit when the track happened to be
+    detected more often than ``P_D``: at a 10 s revisit and ``P_D`` 0.85, 3.1 revisits, a
+    track seen 16 times in a row was deleted at its third miss (30 s, beyond 3.1 · 8.5 s).
+    ``Δ̄`` bounds ``T_s``: a track that three unsynchronized 10 s radars update every 3.3 s
+    does not coast 2.5 · 10 s. The rate is 1 for the other tracks; it is below 1 only where
+    ``revisits`` revisits take longer than ``max_coast`` (a revisit over 4 s with the
     defaults and ``P_D`` 0.9, ``revisits`` 2.5), and then lets a track coast through that
     many revisits."""
-    own = np.where(tracks.hits >= COAST_MIN_HITS, _revisit(tracks, pd), 0.0)
-    reach = np.where(tracks.confirmed, revisits * np.maximum(own, sensor_interval), 0.0)
+    gap = (tracks.updated - tracks.created) / np.maximum(tracks.hits - 1, 1)
+    own = np.where(tracks.hits >= COAST_MIN_HITS, pd * gap, 0.0)
+    seen = np.minimum(sensor_interval, gap)
+    reach = np.where(tracks.confirmed, revisits * np.maximum(own, seen), 0.0)
     return np.minimum(1.0, max_coast / np.maximum(reach, max_coast))
 
 

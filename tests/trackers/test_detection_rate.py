@@ -69,6 +69,9 @@ def test_the_interval_between_a_sensors_scans_is_learned():
     # a longer gap moves the faded mean a fifth of the way; a repeated time leaves it
     rates = rates.learned("r", 40.0, 1, 1).learned("r", 40.0, 1, 1)
     assert rates.interval("r") == pytest.approx(0.8 * 10.0 + 0.2 * 20.0)
+    # an hour's silence counts as three intervals, not as an hour
+    after = rates.learned("r", 3640.0, 1, 1).interval("r")
+    assert after == pytest.approx(0.8 * 12.0 + 0.2 * 36.0)
 
 
 @pytest.mark.parametrize(("looks", "detected"), [(3, 4), (2, -1)])

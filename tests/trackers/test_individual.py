@@ -174,6 +174,30 @@ def test_a_track_seen_more_often_than_pd_coasts_its_sensors_revisits():
     assert k - 15 == 4  # misses in a row when deleted
 
 
+def test_a_track_several_sensors_update_coasts_its_own_interval_not_each_sensors():
+    """Three unsynchronized radars every 10 s (offsets 0, 3.3, 6.7 s, P_D 0.9) update a
+    track every 3.3 s. When its target vanishes, the track is deleted by max_coast_time
+    (10 s: its 4th missed batch), not after 2.5 revisits of 10 s (the sensors' batch
+    interval bounded by the track's own mean interval between detections)."""
+    tr = IndividualTracker(TrackerConfig())
+    rng = np.random.default_rng(5)
+    times = sorted(
+        (10.0 * k + off, f"r{i}") for k in range(6) for i, off in enumerate((0, 3.3, 6.7))
+    )
+    for t, sensor in times:
+        z = np.array([1000.0 + 100.0 * t, 500.0]) + rng.normal(0.0, SIGMA, 2)
+        res = tr.step(scan_at(t, z, sensor=sensor, pd=0.9))
+    (tid,) = [t.id for t in res.confirmed()]
+    missed = 0
+    for t, sensor in sorted(
+        (10.0 * k + off, f"r{i}") for k in range(6, 12) for i, off in enumerate((0, 3.3, 6.7))
+    ):
+        missed += 1
+        if tid in tr.step(scan_at(t, np.zeros((0, 2)), sensor=sensor, pd=0.9)).deleted:
+            break
+    assert missed == 4
+
+
 def _seen_7_in_10(rng, scans):
     """Which of ``scans`` scans detect a target with P_D 0.7: never 3 misses in a row, the
     first 4 and the last detected."""

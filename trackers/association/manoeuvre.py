@@ -113,10 +113,11 @@ def _speed_kept(
 ) -> np.ndarray:
     """Mask of the updated pairs (IMM posteriors ``x (K, M, 5)``, ``mu (K, M)``) whose speed
     stays within three standard deviations of the track's (``x_comb``, ``P_comb`` before,
-    ``τ`` since its last update) under the manoeuvre's along-track part and at most
-    ``max_speed``::
+    ``τ`` since its last update) under the manoeuvre's along-track part and goes no more
+    than that beyond ``max_speed`` (``v_max``) or the track's own speed::
 
-        | |v⁺| − |v⁻| | ≤ 3 σ_s,   σ_s² = (κ a τ)² / 3 + uᵀ P_v u,   |v⁺| ≤ v_max + 3 σ_s,
+        | |v⁺| − |v⁻| | ≤ 3 σ_s,   σ_s² = (κ a τ)² / 3 + uᵀ P_v u,
+        |v⁺| ≤ max(v_max, |v⁻|) + 3 σ_s,
 
     ``v⁺ = Σ_j μ_j v_j`` the combined velocity after the update, ``u`` the unit vector along
     ``v⁻`` (``uᵀ P_v u``: the variance of the speed; the turn rate's uncertainty widens
@@ -134,7 +135,9 @@ def _speed_kept(
     )
     speed = np.hypot(v_new[:, 0], v_new[:, 1])
     change = speed - before
-    return (change * change <= 9.0 * var) & (speed <= max_speed + 3.0 * np.sqrt(var))
+    return (change * change <= 9.0 * var) & (
+        speed <= np.maximum(max_speed, before) + 3.0 * np.sqrt(var)
+    )
 
 
 @dataclass(frozen=True)
@@ -175,8 +178,8 @@ def manoeuvre_search(
     density ``clutter_density``, one number or one per detection) under the
     manoeuvre hypothesis: the chi-square gate ``γ`` on ``P_comb + Q_m``, the gain
     ``G = hit + ln p_m − ln(1 − P_D)`` and GNN over the positive gains (module docstring),
-    among the pairs whose updated speed is kept (:func:`_speed_kept`) and at most
-    ``max_speed``. None when nothing is taken."""
+    among the pairs whose updated speed is kept (:func:`_speed_kept`: the speed of a turn,
+    and not much beyond ``max_speed``). None when nothing is taken."""
     N = x_comb.shape[0]
     if N == 0 or z.shape[0] == 0 or a_max <= 0:
         return None

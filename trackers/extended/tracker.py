@@ -470,13 +470,6 @@ class _PointGates:
         is explained one to one (:attr:`explained`)."""
         return self._sets[2]
 
-    @property
-    def resolved(self) -> np.ndarray:
-        """Mask of the gate pairs explained one to one (:attr:`explained`) by exactly as
-        many tracks: a target, or two side by side, each with its track and no rival."""
-        n_trk, n_det, _ = self._sets
-        return _one_to_one(n_trk, n_det) & (n_trk == n_det)
-
     def detections(self, pairs: np.ndarray) -> np.ndarray:
         """Mask of the scan's detections in the gate ``pairs`` (a mask over the pairs)."""
         out = np.zeros(self.size, dtype=bool)
@@ -921,13 +914,7 @@ class ExtendedTracker(SavesImmutableState):
             np.array([run.velocity_std(0.5 * cfg.resolution_distance) for _, run in ripe]),
         )
         kept = _group_clusters([rows for rows, _ in ripe], point_gates(), cfg, since, moving)
-        # Nor those of targets being acquired: each with a track of ESTABLISHED_HITS
-        # detections or more, confirmed or not yet, alone or two side by side (cars
-        # entering a radar's view in a dense flow, whose tracks take a few scans to confirm).
-        acquiring = _PointGates(view, scan, ESTABLISHED_HITS)
-        if acquiring.det.size:
-            targets = acquiring.detections(acquiring.explained)
-            kept = [rows[~targets[rows]] for rows in kept]
+        kept = _not_acquiring(kept, view, scan)
         for rows, (_, run) in zip(kept, ripe, strict=True):
             if rows.size < cfg.min_detections:
                 candidates.append(_Candidate.first(run.centroid, t))
@@ -954,8 +941,23 @@ class ExtendedTracker(SavesImmutableState):
 
 
 #: A tentative track of this many detections is a target being acquired: a birth leaves its
-#: detection to it when it is resolved (:attr:`_PointGates.resolved`).
+#: detection to it when it explains it one to one (:attr:`_PointGates.explained`).
 ESTABLISHED_HITS = 3
+
+
+def _not_acquiring(
+    clusters: list[np.ndarray], view: PointTrackView, scan: Scan
+) -> list[np.ndarray]:
+    """The detections of each cluster (rows of the scan) less those of targets being
+    acquired: explained one to one (:attr:`_PointGates.explained`) by tracks of
+    :data:`ESTABLISHED_HITS` detections or more, confirmed or not yet, alone or two side by
+    side, or with a rival track of the same start (cars entering a radar's view in a dense
+    flow, whose tracks take a few scans to confirm)."""
+    acquiring = _PointGates(view, scan, ESTABLISHED_HITS)
+    if acquiring.det.size == 0:
+        return clusters
+    targets = acquiring.detections(acquiring.explained)
+    return [rows[~targets[rows]] for rows in clusters]
 
 
 def _group_clusters(
