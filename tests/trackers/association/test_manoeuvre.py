@@ -88,6 +88,25 @@ def test_search_keeps_the_speed_of_a_turn_and_refuses_a_false_alarm_km_across():
     assert _search(236.0, [[0.0, 6000.0]], 1e-12, tau=20.0) is None
 
 
+def test_the_speed_test_allows_for_the_detections_own_noise():
+    """A holding aircraft at 124 m/s, 150 km from a radar of 1.5 mrad (225 m across the
+    beam, here along its track), found again 10 s after its last update: the update's speed
+    of 187 m/s is the detection's noise over 10 s (45 m/s a sigma), and is kept; the same
+    change from a detection of 20 m noise is no turn's."""
+    from trackers.association.manoeuvre import _speed_kept
+
+    x = np.zeros((1, 2, 5))
+    x[0, :, 2] = 187.0
+    mu = np.array([[0.9, 0.1]])
+    xc = np.zeros((1, 5))
+    xc[0, 2] = 124.0
+    Pc = np.diag([400.0, 400.0, 25.0, 25.0, 1e-4])[None]
+    tau = np.array([10.0])
+    wide, narrow = np.diag([225.0**2, 100.0**2])[None], (400.0 * np.eye(2))[None]
+    assert _speed_kept(x, mu, xc, Pc, wide, tau, 50.0, 0.1, 700.0).tolist() == [True]
+    assert _speed_kept(x, mu, xc, Pc, narrow, tau, 50.0, 0.1, 700.0).tolist() == [False]
+
+
 def _turning_target_ids(a_max, range_rates=False, velocity_errors=None):
     """A 250 m/s target seen every 4 s turns at 0.12 rad/s (3 g) from scan 11; scan 12 is
     missed. The ids of the confirmed tracks from scan 8 on. With ``range_rates``, each
