@@ -1388,11 +1388,16 @@ def _group_velocities(z: np.ndarray, tracks: TrackArrays, init: InitiationConfig
     return out
 
 
+def _mean_gap(tracks: TrackArrays) -> np.ndarray:
+    """``Δ̄ = (t_updated − t_created) / (hits − 1)``: each track's mean interval between its
+    detections."""
+    return (tracks.updated - tracks.created) / np.maximum(tracks.hits - 1, 1)
+
+
 def _revisit(tracks: TrackArrays, pd: float) -> np.ndarray:
-    """``T̂ = P_D (t_updated − t_created) / (hits − 1)``: each track's sensor revisit as the
-    track saw it (its mean interval between detections, of which a fraction ``P_D`` are
-    detected)."""
-    return pd * (tracks.updated - tracks.created) / np.maximum(tracks.hits - 1, 1)
+    """``T̂ = P_D Δ̄``: each track's sensor revisit as the track saw it (its mean interval
+    between detections :func:`_mean_gap`, of which a fraction ``P_D`` are detected)."""
+    return pd * _mean_gap(tracks)
 
 
 def _coast_rate(
@@ -1404,10 +1409,10 @@ def _coast_rate(
 ) -> np.ndarray:
     """The rate at which each track's coasting time counts against ``max_coast``:
 
-        min(1, T_coast / (revisits · T̂)),   T̂ = max(P_D (t_updated − t_created) / (hits − 1), T_s),
+        min(1, T_coast / (revisits · T̂)),
 
     ``T̂`` its sensor's revisit: as the track saw it (its mean interval between detections
-    ``Δ̄ = (t_updated − t_created) / (hits − 1)``, of which a fraction ``P_D`` are detected;
+    ``Δ̄`` of :func:`_mean_gap`, of which a fraction ``P_D`` are detected;
     for confirmed tracks of at least :data:`COAST_MIN_HITS` detections, as a false track's
     few hits say little of a revisit), and, for every confirmed track, at least the mean
     interval ``T_s`` between the scan's sensor's batches (0 while unknown) up to ``Δ̄``:
@@ -1422,7 +1427,7 @@ def _coast_rate(
     ``revisits`` revisits take longer than ``max_coast`` (a revisit over 4 s with the
     defaults and ``P_D`` 0.9, ``revisits`` 2.5), and then lets a track coast through that
     many revisits."""
-    gap = (tracks.updated - tracks.created) / np.maximum(tracks.hits - 1, 1)
+    gap = _mean_gap(tracks)
     own = np.where(tracks.hits >= COAST_MIN_HITS, pd * gap, 0.0)
     seen = np.minimum(sensor_interval, gap)
     reach = np.where(tracks.confirmed, revisits * np.maximum(own, seen), 0.0)

@@ -39,9 +39,10 @@ Each scan (:meth:`ExtendedTracker.propose`, then :meth:`~ExtendedTracker.commit`
    ``min_detections`` such detections, seen in ``birth_scans`` scans in a row spanning at
    least ``birth_time`` seconds and moving at no more than ``max_speed``, starts a tentative
    extended track with those of them that are explained by no confirmed individual track or
-   by confirmed tracks moving together, less those of targets being acquired (a tentative
-   track of ``ESTABLISHED_HITS`` detections alone with its detection, or two such side by
-   side).
+   by confirmed tracks moving together (with each other and with the cluster's run), less
+   those of targets being acquired (tracks of ``ESTABLISHED_HITS`` detections, confirmed or
+   not, that explain them one to one: alone with a detection, two side by side, or rivals
+   of one start).
 
 Tracks can also be started by hand (:meth:`ExtendedTracker.start`), from a centroid,
 velocity and extent prior; such a track is confirmed at once.
@@ -856,11 +857,8 @@ class ExtendedTracker(SavesImmutableState):
             # Only what a group may hold makes a run: the detections confirmed tracks
             # explain are the individual targets' (a platoon of cars is no object, and a
             # track lost for a scan or two does not start one either).
-            pg = point_gates()
-            if pg.det.size:
-                theirs = pg.detections(pg.explained)
-                kept = [rows[~theirs[rows]] for rows in subsets]
-                subsets = [rows for rows in kept if rows.size >= max(2, cfg.min_detections)]
+            kept = _less_explained(subsets, point_gates())
+            subsets = [rows for rows in kept if rows.size >= max(2, cfg.min_detections)]
         clusters = [s.tolist() for s in subsets]
         centroids: list[tuple[float, float]] = []
         if clusters:  # every cluster's mean at once: sums over the clusters' runs of rows
@@ -953,11 +951,16 @@ def _not_acquiring(
     :data:`ESTABLISHED_HITS` detections or more, confirmed or not yet, alone or two side by
     side, or with a rival track of the same start (cars entering a radar's view in a dense
     flow, whose tracks take a few scans to confirm)."""
-    acquiring = _PointGates(view, scan, ESTABLISHED_HITS)
-    if acquiring.det.size == 0:
+    return _less_explained(clusters, _PointGates(view, scan, ESTABLISHED_HITS))
+
+
+def _less_explained(clusters: list[np.ndarray], pg: _PointGates) -> list[np.ndarray]:
+    """The detections of each cluster (rows of the scan) less those that the tracks of
+    ``pg`` explain one to one (:attr:`_PointGates.explained`)."""
+    if pg.det.size == 0:
         return clusters
-    targets = acquiring.detections(acquiring.explained)
-    return [rows[~targets[rows]] for rows in clusters]
+    theirs = pg.detections(pg.explained)
+    return [rows[~theirs[rows]] for rows in clusters]
 
 
 def _group_clusters(
