@@ -17,9 +17,9 @@ One step, for a scan at time t with detections z_j (covariances R_j):
    pair with them, and with those a tentative track took when the pair scores higher, each
    pair kept starting a tentative track; each free detection becomes a candidate. With
    ``single_point`` each free detection starts a tentative track scored L(1) = ln(λ_nt/λ_fa);
-7. confirmation and deletion by the sequential test (a track is confirmed at its third
-   detection at the earliest, :data:`MIN_CONFIRM_HITS`), the drop-from-peak and coasting
-   rules.
+7. confirmation and deletion by the sequential test (a track is confirmed once it holds
+   detections of three instants at the earliest, :data:`MIN_CONFIRM_HITS`), the drop-from-peak
+   and coasting rules.
 """
 
 from __future__ import annotations
@@ -80,11 +80,13 @@ __all__ = ["Checkpoint", "IndividualTracker", "TrackArrays"]
 KIND = "individual"
 
 
-#: The sequential test confirms a tentative track at its third detection at the earliest,
-#: whatever its score (tracks handed in by peers keep their status).
+#: The sequential test confirms a tentative track once it holds detections of this many
+#: instants at the earliest, whatever its score (tracks handed in by peers keep their status):
+#: the velocity of two instants has been tested by a third. Several sensors' detections of
+#: one instant (radars reporting together) tell where the target is, not how it moves.
 MIN_CONFIRM_HITS = 3
 
-#: A confirmed track with this many detections may coast for m* − ½ revisits of its
+#: A confirmed track with detections of this many instants may coast for m* − ½ revisits of its
 #: sensor, however short ``max_coast_time`` (:mod:`trackers.detection_rate`): a GMTI revisiting
 #: every 10 s misses a vehicle twice in a row now and then (1 % a scan at P_D 0.9), and
 #: ``max_coast_time`` 10 s deleted it at the second miss.
@@ -97,6 +99,9 @@ class TrackArrays(RowArrays):
 
     x (N, M, 5), P (N, M, 5, 5), mu (N, M): the IMM mode-conditioned estimates and mode
     probabilities; x_comb (N, 5) and P_comb (N, 5, 5) their moment-matched combination.
+    ``hits`` counts a track's detections, ``instants`` the distinct times of them (several
+    sensors' batches of one instant count once); ``took`` is the row of the detection it
+    took at the latest batch (−1: none), what tells its siblings (:func:`_siblings_sharing`).
     ``origin`` numbers the detection a track started from: tracks of one origin are rival
     hypotheses of one target's start, of which only the likeliest is kept once each has
     been tested against a scan.
@@ -112,10 +117,12 @@ class TrackArrays(RowArrays):
     peak: np.ndarray
     confirmed: np.ndarray
     hits: np.ndarray
+    instants: np.ndarray
     created: np.ndarray
     updated: np.ndarray
     detection_ids: np.ndarray
     origin: np.ndarray
+    took: np.ndarray
 
     @staticmethod
     def empty(n_modes: int) -> TrackArrays:
@@ -131,9 +138,11 @@ class TrackArrays(RowArrays):
             peak=np.zeros(0),
             confirmed=np.zeros(0, dtype=bool),
             hits=np.zeros(0, dtype=np.int64),
+            instants=np.zeros(0, dtype=np.int64),
             created=np.zeros(0),
             updated=np.zeros(0),
             detection_ids=np.zeros(0, dtype=object),
+            took=np.zeros(0, dtype=np.intp),
             origin=np.zeros(0, dtype=np.int64),
         )
 
@@ -382,6 +391,7 @@ class IndividualTracker:
         claims = np.full(scan.size, -np.inf)
         masked = np.zeros(0)  # each old track's P_D / the sensor's, below 1 inside a peer's cell
         rivals = np.zeros(0, dtype=bool)  # tentative tracks that lost to a rival of their origin
+        losers = winners = np.zeros(0, dtype=np.intp)  # siblings not the likeliest, and it
         seen: np.ndarray | None = None  # old tracks in the scan's view (None: all)
         range_rates = (0, 0)
         established = np.zeros(scan.size, dtype=bool)
@@ -416,9 +426,15 @@ class IndividualTracker:
             detected = int(np.count_nonzero(look & (tracks.updated == t)))
             # dropped with the deleted tracks below; rivals out of view wait for a scan that
             # looks at them
-            rivals = ~_best_of_each_origin(tracks)
+            # A sibling that is not the likeliest of its siblings (_siblings_sharing) takes
+            # its detections from the likelier one: it prunes no rival of its own origin.
+            losers, winners = _sibling_losers(tracks)
+            rivals = ~_best_of_each_origin(tracks, losers)
             if seen is not None:
                 rivals &= seen
+            # A batch of the instant a track last took a detection at (another radar
+            # reporting with the first) does not test its velocity: no rival loses by it.
+            rivals &= pred.tracks.updated <= t - MIN_PAIR_INTERVAL
 
         if config.initiation.method == "two_point":
             born, candidates = self._initiate_two_point(
@@ -467,12 +483,15 @@ class IndividualTracker:
         # Two detections say that a target is there, not how it moves: a pair whose slow and
         # fast readings both fit (200 m in 1 s under 40 m noise) may hold the wrong one, and
         # confirmed, would be lost at the next detection and coast on as a second track.
-        newly = status.confirmed & ~tracks.confirmed & (tracks.hits >= MIN_CONFIRM_HITS)
+        newly = status.confirmed & ~tracks.confirmed & (tracks.instants >= MIN_CONFIRM_HITS)
+        if losers.size:  # the likeliest sibling confirmed: the others were its other readings
+            newly[losers] = False
+            delete[losers[newly[winners]]] = True
         # A track of 3 detections or more on a target whose confirmed track lost it (it
         # sped up, braked, turned out of the gate) is that track again, confirmed or not yet
         # (a score of 0 or more: no less likely a target than not): the old id goes on with
         # it. Tracks handed back by peers at this scan (rows from n_old on) are left alone.
-        young = ~tracks.confirmed & (tracks.hits >= MIN_CONFIRM_HITS) & ~delete
+        young = ~tracks.confirmed & (tracks.instants >= MIN_CONFIRM_HITS) & ~delete
         young &= newly | (tracks.score >= 0.0)
         young[n_old:] = False
         if young.any():
@@ -560,9 +579,8 @@ class IndividualTracker:
             )
             found = replace(found, x=fx, P=fP, mu=fmu, hit=found.hit + extra)
         second = np.flatnonzero(~first & ~taken[dj])
-        sel = np.concatenate(
-            [sel, second[gnn_assign(ti[second], dj[second], gain[second], len(tracks), scan.size)]]
-        )
+        chosen = second[gnn_assign(ti[second], dj[second], gain[second], len(tracks), scan.size)]
+        sel = np.concatenate([sel, chosen, _siblings_sharing(tracks, ti, dj, gain, second, chosen)])
         at, ad = ti[sel], dj[sel]
         # The range-rates of the confirmed tracks' detections: how many came, how many fit.
         range_rates = (0, 0)
@@ -584,12 +602,16 @@ class IndividualTracker:
                 for pair in ((xu, found.x), (Pu, found.P), (muu, found.mu), (hit, found.hit))
             )
         hits = tracks.hits.copy()
+        instants = tracks.instants.copy()
         updated = tracks.updated.copy()
         det_ids = _objects([()] * len(tracks))
+        took = np.full(len(tracks), -1, dtype=np.intp)
+        took[at] = ad
         if at.size:
             x[at], P[at], mu[at] = xu, Pu, muu
             score[at] = tracks.score[at] + hit
             hits[at] += 1
+            instants[at] += tracks.updated[at] <= scan.time - MIN_PAIR_INTERVAL
             updated[at] = scan.time
             det_ids[at] = _objects([() if i is None else (i,) for i in scan.detection_ids])[ad]
         x_comb, P_comb = imm_combine(x, P, mu)
@@ -597,7 +619,7 @@ class IndividualTracker:
         # the track did not take it, it is far likelier clutter or a second detection of the
         # same target than a new one, and starting a track on it would make a duplicate.
         claims = np.full(scan.size, -np.inf)
-        claims[ad] = score[at]
+        np.maximum.at(claims, ad, score[at])  # (siblings share a detection: the best)
         # Detections that tracks of three or more detections took: a target's, whatever the
         # track's status (a group of young targets is not clutter).
         established = np.zeros(scan.size, dtype=bool)
@@ -615,8 +637,10 @@ class IndividualTracker:
             score=score,
             peak=np.maximum(tracks.peak, score),
             hits=hits,
+            instants=instants,
             updated=updated,
             detection_ids=det_ids,
+            took=took,
         )
         return new, claims, range_rates, established, (ti, dj)
 
@@ -848,9 +872,11 @@ _TRACK_NUMBERS = (
     "peak",
     "confirmed",
     "hits",
+    "instants",
     "created",
     "updated",
     "origin",
+    "took",
 )
 _CANDIDATE_NUMBERS = ("z", "R", "time", "score", "origin")
 
@@ -889,6 +915,7 @@ def _import(section: StateSection, config: TrackerConfig, id_prefix: str = "") -
     k = r.integer("n_candidates", ge=0)
     M, D = len(saved_models), STATE_DIM
     ids = r.strings("tracks.ids", n)
+    hits = r.integers("tracks.hits", (n,), ge=0)
     tracks = TrackArrays(
         ids=_objects(ids),
         x=r.floats("tracks.x", (n, M, D)),
@@ -899,11 +926,21 @@ def _import(section: StateSection, config: TrackerConfig, id_prefix: str = "") -
         score=r.floats("tracks.score", (n,)),
         peak=r.floats("tracks.peak", (n,)),
         confirmed=r.booleans("tracks.confirmed", (n,)),
-        hits=r.integers("tracks.hits", (n,), ge=0),
+        hits=hits,
+        instants=(
+            r.integers("tracks.instants", (n,), ge=0)
+            if r.has("tracks.instants")
+            else hits.copy()  # a file from before instants were counted
+        ),
         created=r.floats("tracks.created", (n,)),
         updated=r.floats("tracks.updated", (n,)),
         detection_ids=_objects(r.string_groups("tracks.detection_ids", n)),
         origin=r.integers("tracks.origin", (n,), ge=0),
+        took=(
+            r.integers("tracks.took", (n,), ge=-1).astype(np.intp)
+            if r.has("tracks.took")
+            else np.full(n, -1, dtype=np.intp)  # a file from before siblings
+        ),
     )
     candidates = Candidates(
         z=r.floats("candidates.z", (k, 2)),
@@ -941,6 +978,8 @@ def _import(section: StateSection, config: TrackerConfig, id_prefix: str = "") -
             raise bad("mode probabilities must be in [0, 1] and sum to 1")
         if (tracks.peak < tracks.score).any():
             raise bad("a track's peak score is below its score")
+        if (tracks.took >= 2**31).any():
+            raise bad("tracks.took: a detection row of 2**31 or more")
         if not (_covariances_ok(tracks.P) and _covariances_ok(tracks.P_comb)):
             raise bad("a track covariance is not symmetric with a positive diagonal")
     if k:
@@ -1026,10 +1065,12 @@ def _new_tracks(
         peak=np.array(score, dtype=float),
         confirmed=np.zeros(n, dtype=bool),
         hits=np.full(n, hits, dtype=np.int64),
+        instants=np.full(n, hits, dtype=np.int64),  # a pair's detections: two instants
         created=np.asarray(created, dtype=float),
         updated=np.full(n, float(scan.time)),
         detection_ids=det_ids,
         origin=np.asarray(origin, dtype=np.int64),
+        took=np.asarray(detections, dtype=np.intp),
     )
 
 
@@ -1102,10 +1143,12 @@ def _adopted(
         peak=score.copy(),
         confirmed=np.array([st.confirmed for st in states], dtype=bool),
         hits=np.array([st.hits for st in states], dtype=np.int64),
+        instants=np.array([st.hits for st in states], dtype=np.int64),  # none said: as many
         created=np.array([st.created for st in states], dtype=float),
         updated=np.array([st.updated for st in states], dtype=float),
         detection_ids=_objects([()] * n),
         origin=counters.origins(n),
+        took=np.full(n, -1, dtype=np.intp),
     )
 
 
@@ -1150,6 +1193,7 @@ def _handed_in(
     tracks = pred.tracks
     ids = tracks.ids.copy()
     created, score, hits = tracks.created.copy(), tracks.score.copy(), tracks.hits.copy()
+    instants = tracks.instants.copy()
     peak, confirmed = tracks.peak.copy(), tracks.confirmed.copy()
     renamed: list[str] = []
     add = np.ones(n, dtype=bool)
@@ -1169,13 +1213,21 @@ def _handed_in(
         ids[k] = st.id
         created[k] = min(created[k], st.created)
         hits[k] += st.hits  # both instances' detections, over the time since created
+        instants[k] += st.hits
         score[k] = max(score[k], st.score)
         peak[k] = max(peak[k], score[k])
         confirmed[k] = True
         free[k] = False
         add[i] = False
     tracks = replace(
-        tracks, ids=ids, created=created, hits=hits, score=score, peak=peak, confirmed=confirmed
+        tracks,
+        ids=ids,
+        created=created,
+        hits=hits,
+        instants=instants,
+        score=score,
+        peak=peak,
+        confirmed=confirmed,
     )
     keep = np.flatnonzero(add)
     born = born.take(keep)
@@ -1389,9 +1441,10 @@ def _group_velocities(z: np.ndarray, tracks: TrackArrays, init: InitiationConfig
 
 
 def _mean_gap(tracks: TrackArrays) -> np.ndarray:
-    """``Δ̄ = (t_updated − t_created) / (hits − 1)``: each track's mean interval between its
-    detections."""
-    return (tracks.updated - tracks.created) / np.maximum(tracks.hits - 1, 1)
+    """``Δ̄ = (t_updated − t_created) / (n − 1)``: each track's mean interval between its
+    detections, ``n`` the instants of them (three radars reporting together update a track
+    once a revisit)."""
+    return (tracks.updated - tracks.created) / np.maximum(tracks.instants - 1, 1)
 
 
 def _revisit(tracks: TrackArrays, pd: float) -> np.ndarray:
@@ -1428,7 +1481,7 @@ def _coast_rate(
     defaults and ``P_D`` 0.9, ``revisits`` 2.5), and then lets a track coast through that
     many revisits."""
     gap = _mean_gap(tracks)
-    own = np.where(tracks.hits >= COAST_MIN_HITS, pd * gap, 0.0)
+    own = np.where(tracks.instants >= COAST_MIN_HITS, pd * gap, 0.0)
     seen = np.minimum(sensor_interval, gap)
     reach = np.where(tracks.confirmed, revisits * np.maximum(own, seen), 0.0)
     return np.minimum(1.0, max_coast / np.maximum(reach, max_coast))
@@ -1604,9 +1657,10 @@ def _relinked(
     rn = np.array([p[0] for p in pairs])
     ro = np.array([p[1] for p in pairs])
     fields = {k: getattr(tracks, k).copy() for k in tracks.__dataclass_fields__}
-    for k in ("x", "P", "mu", "x_comb", "P_comb", "updated", "detection_ids"):
+    for k in ("x", "P", "mu", "x_comb", "P_comb", "updated", "detection_ids", "took"):
         fields[k][ro] = fields[k][rn]
     fields["hits"][ro] += fields["hits"][rn]
+    fields["instants"][ro] += fields["instants"][rn]
     fields["score"][ro] = np.maximum(fields["score"][ro], fields["score"][rn])
     fields["peak"][ro] = fields["score"][ro]  # found again: the drop from the peak restarts
     young = young.copy()
@@ -1617,16 +1671,69 @@ def _relinked(
     return _frozen(TrackArrays(**fields)), young, delete
 
 
-def _best_of_each_origin(tracks: TrackArrays) -> np.ndarray:
+def _best_of_each_origin(tracks: TrackArrays, last: np.ndarray | None = None) -> np.ndarray:
     """Mask of the tracks to keep: every confirmed track, and of the tentative tracks that
     share an origin (rival starts from one detection) only the one with the highest score,
-    unless a confirmed track of that origin exists."""
+    unless a confirmed track of that origin exists; the tracks ``last`` (indices) rank below
+    every other rival whatever their score."""
     # (a confirmed track sorts first as a score of +inf: two sort keys instead of three)
     ranked = np.where(tracks.confirmed, np.inf, tracks.score)
+    if last is not None and last.size:
+        ranked = ranked.copy()
+        ranked[last] = -np.inf
     order, rank = sort_within_groups(tracks.origin, ranked)
     best = np.zeros(len(tracks), dtype=bool)
     best[order] = rank == 0
     return best | tracks.confirmed
+
+
+def _siblings_sharing(
+    tracks: TrackArrays,
+    ti: np.ndarray,
+    dj: np.ndarray,
+    gain: np.ndarray,
+    pairs: np.ndarray,
+    chosen: np.ndarray,
+) -> np.ndarray:
+    """The gate pairs (indices into ``ti``, ``dj``, ``gain``) by which tentative tracks
+    share a detection with a *sibling*: a tentative track that took the same detection at
+    the last batch (``tracks.took``) and took this one (``chosen``, among ``pairs``), where
+    it is in the track's gate with a positive gain and the track took none. Siblings are
+    rival hypotheses of one target (one detection, paired with different earlier ones): the
+    assignment gives a detection to one track, but a detection of the same instant (a second
+    radar reporting with the first) says nothing of their velocities, and one of a later
+    instant is for their scores to tell apart. Alone, all but one would take a miss and most
+    would be deleted however right their velocity."""
+    none = np.zeros(0, dtype=np.intp)
+    if chosen.size == 0 or pairs.size == chosen.size:
+        return none
+    key = np.where(tracks.confirmed, -1, tracks.took)
+    n_det = int(dj.max()) + 1
+    c = chosen[key[ti[chosen]] >= 0]
+    took = np.zeros(len(tracks), dtype=bool)
+    took[ti[chosen]] = True
+    rest = pairs[~took[ti[pairs]] & (key[ti[pairs]] >= 0) & (gain[pairs] > 0)]
+    if rest.size == 0 or c.size == 0:
+        return none
+    return rest[np.isin(key[ti[rest]] * n_det + dj[rest], key[ti[c]] * n_det + dj[c])]
+
+
+def _sibling_losers(tracks: TrackArrays) -> tuple[np.ndarray, np.ndarray]:
+    """Of the tentative tracks that took one detection at this batch (siblings sharing it,
+    :func:`_siblings_sharing`), those that are not the likeliest (the highest score), and
+    the likeliest sibling of each: two index arrays."""
+    none = np.zeros(0, dtype=np.intp)
+    k = np.flatnonzero(~tracks.confirmed & (tracks.took >= 0))
+    if k.size < 2:
+        return none, none
+    row = tracks.took[k]
+    order = np.lexsort((-tracks.score[k], row))
+    k, row = k[order], row[order]
+    lead = np.r_[True, row[1:] != row[:-1]]
+    if lead.all():  # no two took one detection
+        return none, none
+    winner = k[lead][np.cumsum(lead) - 1]
+    return k[~lead], winner[~lead]
 
 
 def _snapshots(

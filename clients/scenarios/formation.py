@@ -7,7 +7,9 @@ Shared by the tests and ``python -m benchmarks.formation``.
   m/s, formation 2 from (−5000, 8000), (−5200, 8200), (−5550, 8400), (−5700, 8600) m at
   (100, 300) m/s; three radars at (−20, 0), (0, −20) and (20, 0) km, range noise 40 m,
   bearing noise 2 mrad, Pd 0.9, one scan a second each, a third of a second apart (the
-  fusion centre updates the formations with each sensor's batch in turn), 100 scans.
+  fusion centre updates the formations with each sensor's batch in turn), 100 scans; with
+  ``synchronized`` the three report at the same instants, as the paper's ``Z(k)`` gathers
+  them (three batches of one time, in radar order).
 - :func:`environment_2`: the same with clutter (Table I): per scan and per sensor,
   ``Poisson(λ1)`` false alarms uniform in the box 1 km larger on each side than formation 1,
   ``Poisson(λ2)`` in that of formation 2.
@@ -141,22 +143,30 @@ def _radars(periods: tuple[float, ...] = (1.0, 1.0, 1.0), offsets=(0.0, 0.0, 0.0
     )
 
 
-def environment_1(seed: int = 0, scans: int = 100) -> FormationScenario:
+def environment_1(
+    seed: int = 0, scans: int = 100, *, synchronized: bool = False
+) -> FormationScenario:
     """Paper 003's environment 1 (no clutter)."""
-    return environment_2(0.0, 0.0, seed=seed, scans=scans)
+    return environment_2(0.0, 0.0, seed=seed, scans=scans, synchronized=synchronized)
 
 
 def environment_2(
-    lambda_1: float, lambda_2: float, seed: int = 0, scans: int = 100
+    lambda_1: float,
+    lambda_2: float,
+    seed: int = 0,
+    scans: int = 100,
+    *,
+    synchronized: bool = False,
 ) -> FormationScenario:
     """Paper 003's environment 2: environment 1 with ``Poisson(λ1)`` and ``Poisson(λ2)`` false
-    alarms per scan and sensor around formations 1 and 2."""
+    alarms per scan and sensor around formations 1 and 2; the radars a third of a second
+    apart, or reporting together with ``synchronized``."""
     return FormationScenario(
         formations=(
             FormationTruth(_FIRST, (-200.0, 300.0), clutter_mean=float(lambda_1)),
             FormationTruth(_SECOND, (100.0, 300.0), clutter_mean=float(lambda_2)),
         ),
-        radars=_radars(offsets=(0.0, 1.0 / 3.0, 2.0 / 3.0)),
+        radars=_radars(offsets=(0.0, 0.0, 0.0) if synchronized else (0.0, 1.0 / 3.0, 2.0 / 3.0)),
         duration=float(scans - 1),
         seed=seed,
     )

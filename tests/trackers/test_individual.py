@@ -537,6 +537,32 @@ def test_a_track_is_confirmed_at_its_third_detection_at_the_earliest():
     assert third == "confirmed"
 
 
+def test_detections_of_one_instant_from_two_radars_confirm_no_track():
+    """Two radars reporting at the same instants: at t = 1 each sees the target 250 m from
+    where it was, and a false alarm of t = 0 lies 50 m behind it. The pair (false alarm,
+    target) starts a slow track; the second radar's detection at t = 1 is its third, with a
+    score far above the threshold, and confirmed it: a false track (its velocity, −14 m/s,
+    was never tested). Confirmation waits for detections of three instants: the slow track
+    never gets one, and the target's own track is confirmed at t = 3 at 250 m/s."""
+    tr = IndividualTracker(TrackerConfig())
+
+    def batch(sensor, t, points):
+        z = np.asarray(points, dtype=float)
+        R = np.tile(400.0 * np.eye(2), (len(z), 1, 1))
+        return tr.step(Scan(sensor, float(t), z, R, pd=0.9, clutter_density=1e-8))
+
+    for sensor in ("a", "b"):
+        batch(sensor, 0.0, [[0.0, 0.0], [300.0, 0.0]])
+    seen = []
+    for t in (1, 2, 3):
+        for sensor in ("a", "b"):
+            res = batch(sensor, t, [[250.0 * t, 0.0]])
+            seen.append([(round(float(x.velocity[0])), x.status) for x in res.tracks])
+    assert all(status == "tentative" for step in seen[:3] for _, status in step)
+    confirmed = [v for v, status in seen[-1] if status == "confirmed"]
+    assert confirmed == [250]
+
+
 def test_the_step_counts_the_range_rates_of_confirmed_tracks() -> None:
     """StepResult.range_rates: those that came with a confirmed track's detection, and those
     that fitted it; a wrong-signed one comes and does not fit."""

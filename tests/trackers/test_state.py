@@ -72,6 +72,13 @@ def restarted(p: TrackingPipeline, config: TrackerConfig | None = None) -> Track
     return q
 
 
+def _without(state: PipelineState, *names: str) -> PipelineState:
+    """``state`` as a file written before the point section had the arrays ``names``."""
+    arrays = {k: v for k, v in state.point.arrays.items() if k not in names}
+    section = StateSection(state.point.values, arrays)
+    return PipelineState(state.last_time, state.point_kind, section, state.peers)
+
+
 def test_candidates_keep_their_group_velocities_and_older_files_have_none() -> None:
     p = TrackingPipeline(TrackerConfig())
     v = np.array([-200.0, 300.0])
@@ -82,15 +89,28 @@ def test_candidates_keep_their_group_velocities_and_older_files_have_none() -> N
     c = p.point.candidates  # type: ignore[attr-defined]
     assert np.isfinite(c.group_velocity).all(axis=1).sum() == 1  # the detection beside it
     assert candidates_of(restarted(p)) == candidates_of(p)
-    state = p.export_state()
-    arrays = dict(state.point.arrays)
-    del arrays["candidates.grouped"], arrays["candidates.group_velocity"]
-    older = PipelineState(
-        state.last_time, state.point_kind, StateSection(state.point.values, arrays), state.peers
-    )
+    older = _without(p.export_state(), "candidates.grouped", "candidates.group_velocity")
     q = TrackingPipeline(TrackerConfig())
     q.import_state(older)
     assert np.isnan(q.point.candidates.group_velocity).all()  # type: ignore[attr-defined]
+
+
+def test_tracks_of_an_older_file_count_an_instant_a_detection_and_have_no_siblings(
+    scans: list[Scan],
+) -> None:
+    """A file written before tracks counted their instants and siblings: each detection was
+    an instant (one sensor's scans, as before), and no track took a detection of the last
+    batch with another."""
+    p = TrackingPipeline(TrackerConfig())
+    for scan in scans[:12]:
+        p.process(scan)
+    older = _without(p.export_state(), "tracks.instants", "tracks.took")
+    q = TrackingPipeline(TrackerConfig())
+    q.import_state(older)
+    tracks = q.point.tracks  # type: ignore[attr-defined]
+    assert len(tracks) and (tracks.instants == tracks.hits).all()
+    assert (tracks.took == -1).all()
+    assert tracks_of(q) == tracks_of(p)
 
 
 @pytest.mark.parametrize("at", [0, 1, 2, 40])
