@@ -123,6 +123,7 @@ def _state_dict(st: PointTrackState) -> dict[str, Any]:
         "confirmed": st.confirmed,
         "created": st.created,
         "updated": st.updated,
+        "instants": st.instants,
     }
 
 
@@ -135,6 +136,8 @@ def _state_of(d: Any) -> PointTrackState:
         P = np.asarray(d["P"], dtype=float)
         numbers = [float(d[k]) for k in ("time", "score", "created", "updated")]
         tid, hits, confirmed = d["id"], int(d["hits"]), bool(d["confirmed"])
+        instants = d.get("instants")  # (an instance of before instants: none)
+        instants = None if instants is None else int(instants)
     except (KeyError, TypeError, ValueError) as exc:
         raise ValueError(f"a track field is missing or not a number: {exc}") from None
     if not isinstance(tid, str) or not 0 < len(tid) <= 200:
@@ -156,6 +159,7 @@ def _state_of(d: Any) -> PointTrackState:
         confirmed=confirmed,
         created=created,
         updated=updated,
+        instants=instants,
     )
 
 

@@ -18,7 +18,7 @@ One step, for a scan at time t with detections z_j (covariances R_j):
    pair kept starting a tentative track; each free detection becomes a candidate. With
    ``single_point`` each free detection starts a tentative track scored L(1) = ln(λ_nt/λ_fa);
 7. confirmation and deletion by the sequential test (a track is confirmed once it holds
-   detections of three instants at the earliest, :data:`MIN_CONFIRM_HITS`), the drop-from-peak
+   detections of three instants at the earliest, :data:`MIN_CONFIRM_INSTANTS`), the drop-from-peak
    and coasting rules.
 """
 
@@ -84,13 +84,17 @@ KIND = "individual"
 #: instants at the earliest, whatever its score (tracks handed in by peers keep their status):
 #: the velocity of two instants has been tested by a third. Several sensors' detections of
 #: one instant (radars reporting together) tell where the target is, not how it moves.
-MIN_CONFIRM_HITS = 3
+MIN_CONFIRM_INSTANTS = 3
 
 #: A confirmed track with detections of this many instants may coast for m* − ½ revisits of its
 #: sensor, however short ``max_coast_time`` (:mod:`trackers.detection_rate`): a GMTI revisiting
 #: every 10 s misses a vehicle twice in a row now and then (1 % a scan at P_D 0.9), and
 #: ``max_coast_time`` 10 s deleted it at the second miss.
-COAST_MIN_HITS = 5
+COAST_MIN_INSTANTS = 5
+
+#: The highest serial number a state file may give the next detection (``TrackArrays.took``:
+#: ten million detections a second for ten thousand years stay below it).
+MAX_SERIAL = 2**62
 
 
 @dataclass(frozen=True, eq=False)
@@ -100,8 +104,10 @@ class TrackArrays(RowArrays):
     x (N, M, 5), P (N, M, 5, 5), mu (N, M): the IMM mode-conditioned estimates and mode
     probabilities; x_comb (N, 5) and P_comb (N, 5, 5) their moment-matched combination.
     ``hits`` counts a track's detections, ``instants`` the distinct times of them (several
-    sensors' batches of one instant count once); ``took`` is the row of the detection it
-    took at the latest batch (−1: none), what tells its siblings (:func:`_siblings_sharing`).
+    sensors' batches within :data:`~trackers.initiation.MIN_PAIR_INTERVAL` of one another count
+    once); ``took`` is the serial number of the last detection it took (the tracker numbers
+    every detection it is given, batch after batch; −1: none), what tells its siblings
+    (:func:`_siblings_sharing`).
     ``origin`` numbers the detection a track started from: tracks of one origin are rival
     hypotheses of one target's start, of which only the likeliest is kept once each has
     been tested against a scan.
@@ -142,7 +148,7 @@ class TrackArrays(RowArrays):
             created=np.zeros(0),
             updated=np.zeros(0),
             detection_ids=np.zeros(0, dtype=object),
-            took=np.zeros(0, dtype=np.intp),
+            took=np.zeros(0, dtype=np.int64),
             origin=np.zeros(0, dtype=np.int64),
         )
 
@@ -197,17 +203,23 @@ class _State:
     time: float | None
     next_id: int
     next_origin: int
+    #: the serial number of the next batch's first detection (``TrackArrays.took``)
+    next_serial: int = 0
     #: each sensor's detection probability as its tracks show it (not saved: relearned)
     rates: DetectionRates = field(default_factory=DetectionRates)
 
 
 class _Counters:
-    """The id and origin counters of one proposed step (the tracker's own move on commit)."""
+    """The id and origin counters of one proposed step (the tracker's own move on commit),
+    and the serial number of the step's first detection."""
 
-    def __init__(self, next_id: int, next_origin: int, id_prefix: str = "") -> None:
+    def __init__(
+        self, next_id: int, next_origin: int, id_prefix: str = "", serial: int = 0
+    ) -> None:
         self.next_id = next_id
         self.next_origin = next_origin
         self.id_prefix = id_prefix
+        self.serial = serial
 
     def ids(self, n: int) -> np.ndarray:
         p = self.id_prefix
@@ -357,6 +369,7 @@ class IndividualTracker:
             time=None,
             next_id=st.next_id,
             next_origin=st.next_origin,
+            next_serial=st.next_serial,
         )
         self._version += 1
         self._prediction = None
@@ -374,7 +387,8 @@ class IndividualTracker:
         pd_coast = rates.estimate(scan.sensor_id, tm.pd) if scan.pd is None else pd_sensor
         reach = coast_revisits(pd_coast, tm.p_true_delete)
         longer = reach > MIN_MISSES - 0.5  # a sensor that misses more than P_D 0.9 does
-        counters = _Counters(self._state.next_id, self._state.next_origin, self.id_prefix)
+        serial = self._state.next_serial  # this batch's detection j is number serial + j
+        counters = _Counters(self._state.next_id, self._state.next_origin, self.id_prefix, serial)
 
         released: tuple[PointTrackState, ...] = ()
         if directives.release:
@@ -419,7 +433,7 @@ class IndividualTracker:
                     rates.interval(scan.sensor_id),
                 ) <= tm.max_coast_time
             tracks, claims, range_rates, established, gated = self._update_existing(
-                pred, scan, pd, lam_fa, seen, searching
+                pred, scan, pd, lam_fa, seen, searching, serial
             )
             look = _looks(pred.tracks, seen, masked, t, pd_coast)
             looks = int(np.count_nonzero(look))
@@ -428,7 +442,7 @@ class IndividualTracker:
             # looks at them
             # A sibling that is not the likeliest of its siblings (_siblings_sharing) takes
             # its detections from the likelier one: it prunes no rival of its own origin.
-            losers, winners = _sibling_losers(tracks)
+            losers, winners = _sibling_losers(tracks, serial)
             rivals = ~_best_of_each_origin(tracks, losers)
             if seen is not None:
                 rivals &= seen
@@ -483,17 +497,18 @@ class IndividualTracker:
         # Two detections say that a target is there, not how it moves: a pair whose slow and
         # fast readings both fit (200 m in 1 s under 40 m noise) may hold the wrong one, and
         # confirmed, would be lost at the next detection and coast on as a second track.
-        newly = status.confirmed & ~tracks.confirmed & (tracks.instants >= MIN_CONFIRM_HITS)
+        newly = status.confirmed & ~tracks.confirmed & (tracks.instants >= MIN_CONFIRM_INSTANTS)
         if losers.size:  # the likeliest sibling confirmed: the others were its other readings
             newly[losers] = False
-            delete[losers[newly[winners]]] = True
-        # A track of 3 detections or more on a target whose confirmed track lost it (it
-        # sped up, braked, turned out of the gate) is that track again, confirmed or not yet
+            delete[losers[(newly & ~delete)[winners]]] = True
+        # A track with detections of 3 instants or more on a target whose confirmed track lost
+        # it (it sped up, braked, turned out of the gate) is that track again, confirmed or not yet
         # (a score of 0 or more: no less likely a target than not): the old id goes on with
         # it. Tracks handed back by peers at this scan (rows from n_old on) are left alone.
-        young = ~tracks.confirmed & (tracks.instants >= MIN_CONFIRM_HITS) & ~delete
+        young = ~tracks.confirmed & (tracks.instants >= MIN_CONFIRM_INSTANTS) & ~delete
         young &= newly | (tracks.score >= 0.0)
         young[n_old:] = False
+        young[losers] = False  # not the likeliest reading of its start: not confirmed now
         if young.any():
             tracks, young, delete = _relinked(tracks, young, delete, t, config, n_old)
             newly &= ~delete
@@ -510,6 +525,7 @@ class IndividualTracker:
             time=t,
             next_id=counters.next_id,
             next_origin=counters.next_origin,
+            next_serial=serial + scan.size,
             rates=rates.learned(scan.sensor_id, t, looks, detected),
         )
         names = tuple(m.name for m in models)
@@ -537,6 +553,7 @@ class IndividualTracker:
         lam_fa: float | np.ndarray,
         seen: np.ndarray | None,
         searching: np.ndarray | None,
+        serial: int,
     ) -> tuple[TrackArrays, np.ndarray, tuple[int, int], np.ndarray, tuple[np.ndarray, np.ndarray]]:
         """The tracks updated with this scan (``pd`` the detection probability of each), and
         each detection's *claim* (``lam_fa`` the false-alarm density, one or one a detection):
@@ -546,7 +563,8 @@ class IndividualTracker:
         takes no detection keeps its score: it was not missed, only not looked at. Last, the
         number of range-rates of the detections confirmed tracks took, and of those used
         (inside their gate), the detections taken by tracks of at least
-        :data:`ESTABLISHED_HITS` detections, and the gated pairs (track and detection
+        :data:`ESTABLISHED_HITS` detections (whatever their instants: a target's, not
+        clutter), and the gated pairs (track and detection
         indices)."""
         config, tracks = pred.config, pred.tracks
         x_pred, P_pred, c_bar, xc, Pc = pred.x_pred, pred.P_pred, pred.c_bar, pred.xc, pred.Pc
@@ -605,8 +623,8 @@ class IndividualTracker:
         instants = tracks.instants.copy()
         updated = tracks.updated.copy()
         det_ids = _objects([()] * len(tracks))
-        took = np.full(len(tracks), -1, dtype=np.intp)
-        took[at] = ad
+        took = tracks.took.copy()
+        took[at] = serial + ad
         if at.size:
             x[at], P[at], mu[at] = xu, Pu, muu
             score[at] = tracks.score[at] + hit
@@ -855,6 +873,7 @@ class Checkpoint:
             "time": st.time,
             "next_id": st.next_id,
             "next_origin": st.next_origin,
+            "next_serial": st.next_serial,
             "models": list(st.config.motion.models),
             "n_tracks": len(tr),
             "n_candidates": len(cand),
@@ -910,12 +929,18 @@ def _import(section: StateSection, config: TrackerConfig, id_prefix: str = "") -
     t = r.time("time")
     next_id = r.integer("next_id", ge=1)
     next_origin = r.integer("next_origin", ge=0)
+    next_serial = r.integer("next_serial", ge=0) if "next_serial" in r.values else 0
+    if next_serial > MAX_SERIAL:
+        raise StateError(f"point.next_serial: above {MAX_SERIAL}, got {next_serial}")
     saved_models = r.names("models")
     n = r.integer("n_tracks", ge=0)
     k = r.integer("n_candidates", ge=0)
     M, D = len(saved_models), STATE_DIM
     ids = r.strings("tracks.ids", n)
     hits = r.integers("tracks.hits", (n,), ge=0)
+    took = r.integers("tracks.took", (n,), ge=-1) if r.has("tracks.took") else None
+    if took is None or "next_serial" not in r.values:  # a file from before siblings
+        took = np.full(n, -1, dtype=np.int64)
     tracks = TrackArrays(
         ids=_objects(ids),
         x=r.floats("tracks.x", (n, M, D)),
@@ -936,11 +961,7 @@ def _import(section: StateSection, config: TrackerConfig, id_prefix: str = "") -
         updated=r.floats("tracks.updated", (n,)),
         detection_ids=_objects(r.string_groups("tracks.detection_ids", n)),
         origin=r.integers("tracks.origin", (n,), ge=0),
-        took=(
-            r.integers("tracks.took", (n,), ge=-1).astype(np.intp)
-            if r.has("tracks.took")
-            else np.full(n, -1, dtype=np.intp)  # a file from before siblings
-        ),
+        took=took,
     )
     candidates = Candidates(
         z=r.floats("candidates.z", (k, 2)),
@@ -978,8 +999,12 @@ def _import(section: StateSection, config: TrackerConfig, id_prefix: str = "") -
             raise bad("mode probabilities must be in [0, 1] and sum to 1")
         if (tracks.peak < tracks.score).any():
             raise bad("a track's peak score is below its score")
-        if (tracks.took >= 2**31).any():
-            raise bad("tracks.took: a detection row of 2**31 or more")
+        if (tracks.took >= next_serial).any():
+            raise bad(f"next_serial {next_serial} is not above every detection a track took")
+        if (tracks.instants > tracks.hits).any() or (
+            tracks.instants < np.minimum(tracks.hits, 1)
+        ).any():
+            raise bad("a track's instants must be from 1 to its hits (0 with none)")
         if not (_covariances_ok(tracks.P) and _covariances_ok(tracks.P_comb)):
             raise bad("a track covariance is not symmetric with a positive diagonal")
     if k:
@@ -999,6 +1024,7 @@ def _import(section: StateSection, config: TrackerConfig, id_prefix: str = "") -
         time=t,
         next_id=next_id,
         next_origin=next_origin,
+        next_serial=next_serial,
     )
 
 
@@ -1070,7 +1096,7 @@ def _new_tracks(
         updated=np.full(n, float(scan.time)),
         detection_ids=det_ids,
         origin=np.asarray(origin, dtype=np.int64),
-        took=np.asarray(detections, dtype=np.intp),
+        took=counters.serial + np.asarray(detections, dtype=np.int64),
     )
 
 
@@ -1120,6 +1146,7 @@ def _state_of(pred: _Prediction, i: int, t: float) -> PointTrackState:
         confirmed=bool(tr.confirmed[i]),
         created=float(tr.created[i]),
         updated=float(tr.updated[i]),
+        instants=int(tr.instants[i]),
     )
 
 
@@ -1143,13 +1170,18 @@ def _adopted(
         peak=score.copy(),
         confirmed=np.array([st.confirmed for st in states], dtype=bool),
         hits=np.array([st.hits for st in states], dtype=np.int64),
-        instants=np.array([st.hits for st in states], dtype=np.int64),  # none said: as many
+        instants=np.array([_instants(st) for st in states], dtype=np.int64),
         created=np.array([st.created for st in states], dtype=float),
         updated=np.array([st.updated for st in states], dtype=float),
         detection_ids=_objects([()] * n),
         origin=counters.origins(n),
-        took=np.full(n, -1, dtype=np.intp),
+        took=np.full(n, -1, dtype=np.int64),
     )
+
+
+def _instants(st: PointTrackState) -> int:
+    """A handed state's instants: as many as its hits where it does not say (a peer's)."""
+    return int(st.hits if st.instants is None else min(max(st.instants, 1), st.hits))
 
 
 #: χ²(4) at 0.999: a handed-over track and a local one closer than this in position and
@@ -1213,7 +1245,7 @@ def _handed_in(
         ids[k] = st.id
         created[k] = min(created[k], st.created)
         hits[k] += st.hits  # both instances' detections, over the time since created
-        instants[k] += st.hits
+        instants[k] += _instants(st)
         score[k] = max(score[k], st.score)
         peak[k] = max(peak[k], score[k])
         confirmed[k] = True
@@ -1466,7 +1498,8 @@ def _coast_rate(
 
     ``T̂`` its sensor's revisit: as the track saw it (its mean interval between detections
     ``Δ̄`` of :func:`_mean_gap`, of which a fraction ``P_D`` are detected;
-    for confirmed tracks of at least :data:`COAST_MIN_HITS` detections, as a false track's
+    for confirmed tracks with detections of at least :data:`COAST_MIN_INSTANTS` instants, as a
+    false track's
     few hits say little of a revisit), and, for every confirmed track, at least the mean
     interval ``T_s`` between the scan's sensor's batches (0 while unknown) up to ``Δ̄``:
 
@@ -1481,7 +1514,7 @@ def _coast_rate(
     defaults and ``P_D`` 0.9, ``revisits`` 2.5), and then lets a track coast through that
     many revisits."""
     gap = _mean_gap(tracks)
-    own = np.where(tracks.instants >= COAST_MIN_HITS, pd * gap, 0.0)
+    own = np.where(tracks.instants >= COAST_MIN_INSTANTS, pd * gap, 0.0)
     seen = np.minimum(sensor_interval, gap)
     reach = np.where(tracks.confirmed, revisits * np.maximum(own, seen), 0.0)
     return np.minimum(1.0, max_coast / np.maximum(reach, max_coast))
@@ -1561,9 +1594,9 @@ def _relinked(
     config: TrackerConfig,
     n_old: int,
 ) -> tuple[TrackArrays, np.ndarray, np.ndarray]:
-    """Young tracks (``young``: tentative ones of at least 3 detections that are confirmed
-    at this scan or score 0 or more) that continue a confirmed track which lost their
-    target, merged into it: the old track takes the young one's state and detections, goes
+    """Young tracks (``young``: tentative ones with detections of at least 3 instants that
+    are confirmed at this scan or score 0 or more) that continue a confirmed track which lost
+    their target, merged into it: the old track takes the young one's state and detections, goes
     on under its id, confirmed, with the higher of the two scores as its score and its peak;
     the young one is dropped. Returns the tracks, ``young`` and ``delete`` (the old track
     kept, the young one dropped). Only the first ``n_old`` rows (the tracks before this
@@ -1696,40 +1729,49 @@ def _siblings_sharing(
     chosen: np.ndarray,
 ) -> np.ndarray:
     """The gate pairs (indices into ``ti``, ``dj``, ``gain``) by which tentative tracks
-    share a detection with a *sibling*: a tentative track that took the same detection at
-    the last batch (``tracks.took``) and took this one (``chosen``, among ``pairs``), where
-    it is in the track's gate with a positive gain and the track took none. Siblings are
-    rival hypotheses of one target (one detection, paired with different earlier ones): the
-    assignment gives a detection to one track, but a detection of the same instant (a second
-    radar reporting with the first) says nothing of their velocities, and one of a later
-    instant is for their scores to tell apart. Alone, all but one would take a miss and most
-    would be deleted however right their velocity."""
+    share a detection with a *sibling*, a tentative track whose last detection was theirs
+    (``tracks.took``) and that took this one (``chosen``, among ``pairs``): for each track
+    the assignment left without a detection, its pair of highest gain among such, where the
+    gain is positive. Siblings are rival readings of one target (a detection paired with
+    different earlier ones, or taken by an older track and by a pair born on it): the
+    assignment gives a detection to one of them, but a detection of the same instant (a
+    second radar reporting with the first) says nothing of their velocities, and one of a
+    later instant is for their scores to tell apart. Alone, all but one would take a miss
+    and most would be deleted however right their velocity."""
     none = np.zeros(0, dtype=np.intp)
     if chosen.size == 0 or pairs.size == chosen.size:
         return none
     key = np.where(tracks.confirmed, -1, tracks.took)
-    n_det = int(dj.max()) + 1
-    c = chosen[key[ti[chosen]] >= 0]
     took = np.zeros(len(tracks), dtype=bool)
     took[ti[chosen]] = True
+    c = chosen[key[ti[chosen]] >= 0]
     rest = pairs[~took[ti[pairs]] & (key[ti[pairs]] >= 0) & (gain[pairs] > 0)]
     if rest.size == 0 or c.size == 0:
         return none
-    return rest[np.isin(key[ti[rest]] * n_det + dj[rest], key[ti[c]] * n_det + dj[c])]
+    # (last detection, this one) of each pair, on small numbers: the keys' ranks
+    _, rank = np.unique(np.concatenate([key[ti[c]], key[ti[rest]]]), return_inverse=True)
+    n_det = int(dj.max()) + 1
+    code = rank * n_det + np.concatenate([dj[c], dj[rest]])
+    rest = rest[np.isin(code[c.size :], code[: c.size])]
+    if rest.size == 0:
+        return none
+    rest = rest[np.lexsort((-gain[rest], ti[rest]))]  # each track's best pair first
+    return rest[np.r_[True, ti[rest][1:] != ti[rest][:-1]]]
 
 
-def _sibling_losers(tracks: TrackArrays) -> tuple[np.ndarray, np.ndarray]:
-    """Of the tentative tracks that took one detection at this batch (siblings sharing it,
-    :func:`_siblings_sharing`), those that are not the likeliest (the highest score), and
-    the likeliest sibling of each: two index arrays."""
+def _sibling_losers(tracks: TrackArrays, serial: int) -> tuple[np.ndarray, np.ndarray]:
+    """Of the tentative tracks that took one detection at this batch (its detections are
+    numbered from ``serial``; siblings sharing it, :func:`_siblings_sharing`), those that
+    are not the likeliest (the highest score), and the likeliest sibling of each: two index
+    arrays."""
     none = np.zeros(0, dtype=np.intp)
-    k = np.flatnonzero(~tracks.confirmed & (tracks.took >= 0))
+    k = np.flatnonzero(~tracks.confirmed & (tracks.took >= serial))
     if k.size < 2:
         return none, none
-    row = tracks.took[k]
-    order = np.lexsort((-tracks.score[k], row))
-    k, row = k[order], row[order]
-    lead = np.r_[True, row[1:] != row[:-1]]
+    det = tracks.took[k]
+    order = np.lexsort((-tracks.score[k], det))
+    k, det = k[order], det[order]
+    lead = np.r_[True, det[1:] != det[:-1]]
     if lead.all():  # no two took one detection
         return none, none
     winner = k[lead][np.cumsum(lead) - 1]

@@ -111,7 +111,8 @@ class PointTrackState:
     """A point track's full state, as handed between trackers.
 
     ``x`` is ``[x, y, vx, vy, ω]`` (m, m/s, rad/s) with covariance ``P`` (5x5); ``score`` the
-    track's log-likelihood ratio; ``time`` the instant of ``x``.
+    track's log-likelihood ratio; ``time`` the instant of ``x``; ``instants`` the distinct
+    times of its ``hits`` detections (``None``: as many as its hits).
     """
 
     id: str
@@ -123,6 +124,7 @@ class PointTrackState:
     confirmed: bool
     created: float
     updated: float
+    instants: int | None = None
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "x", _read_only(np.reshape(self.x, 5)))

@@ -563,6 +563,50 @@ def test_detections_of_one_instant_from_two_radars_confirm_no_track():
     assert confirmed == [250]
 
 
+class _Siblings:
+    """What the sibling rules read of the tracks: status, last detection, score."""
+
+    def __init__(self, took, score=None, confirmed=None):
+        self.took = np.asarray(took, dtype=np.int64)
+        n = self.took.size
+        self.score = np.zeros(n) if score is None else np.asarray(score, dtype=float)
+        self.confirmed = np.zeros(n, bool) if confirmed is None else np.asarray(confirmed)
+
+    def __len__(self):
+        return self.took.size
+
+
+def test_a_sibling_left_without_a_detection_takes_its_best_one_of_those_siblings_took():
+    """Tracks 0-2 took detection 7 last; the assignment gave detection 0 to track 0 and 1 to
+    track 1. Track 2 has both in its gate and takes one, the one of higher gain; track 3 (a
+    sibling of none) and the pair of negative gain take nothing."""
+    from trackers.individual import _siblings_sharing
+
+    tracks = _Siblings(took=[7, 7, 7, 9])
+    ti = np.array([0, 1, 2, 2, 3, 2])
+    dj = np.array([0, 1, 0, 1, 1, 2])
+    gain = np.array([3.0, 2.0, 1.0, 2.5, 4.0, -1.0])
+    pairs = np.arange(6)
+    chosen = np.array([0, 1])
+    assert _siblings_sharing(tracks, ti, dj, gain, pairs, chosen).tolist() == [3]
+    # a confirmed track shares nothing, nor one whose last detection was another's
+    confirmed = _Siblings(took=[7, 7, 7, 9], confirmed=[False, False, True, False])
+    assert _siblings_sharing(confirmed, ti, dj, gain, pairs, chosen).size == 0
+
+
+def test_of_siblings_taking_one_detection_only_the_likeliest_is_kept_when_it_is_confirmed():
+    """Detections of this batch are numbered from 100: tracks 0, 1, 2 took number 104, track 3
+    number 105, track 4 one of an earlier batch. The likeliest of 0-2 (track 1) is each
+    loser's winner; 3 and 4 have no siblings at this batch."""
+    from trackers.individual import _sibling_losers
+
+    tracks = _Siblings(took=[104, 104, 104, 105, 50], score=[1.0, 4.0, 2.0, 9.0, 0.0])
+    losers, winners = _sibling_losers(tracks, 100)
+    assert sorted(zip(losers.tolist(), winners.tolist(), strict=True)) == [(0, 1), (2, 1)]
+    none, _ = _sibling_losers(_Siblings(took=[104, 105, 50, 50]), 100)
+    assert none.size == 0
+
+
 def test_the_step_counts_the_range_rates_of_confirmed_tracks() -> None:
     """StepResult.range_rates: those that came with a confirmed track's detection, and those
     that fitted it; a wrong-signed one comes and does not fit."""

@@ -104,7 +104,12 @@ def test_tracks_of_an_older_file_count_an_instant_a_detection_and_have_no_siblin
     p = TrackingPipeline(TrackerConfig())
     for scan in scans[:12]:
         p.process(scan)
-    older = _without(p.export_state(), "tracks.instants", "tracks.took")
+    state = p.export_state()
+    values = {k: v for k, v in state.point.values.items() if k != "next_serial"}
+    state = PipelineState(
+        state.last_time, state.point_kind, StateSection(values, state.point.arrays), state.peers
+    )
+    older = _without(state, "tracks.instants", "tracks.took")
     q = TrackingPipeline(TrackerConfig())
     q.import_state(older)
     tracks = q.point.tracks  # type: ignore[attr-defined]
@@ -139,6 +144,28 @@ def test_a_restored_pipeline_goes_on_exactly_as_an_uninterrupted_one(
     if seen_before:  # the id counter went on: no id of before the save is given again
         top = max(int(i[1:]) for i in seen_before)
         assert min(int(i[1:]) for i in new_ids) > top
+
+
+@pytest.mark.parametrize("at", [5, 13, 31])
+def test_a_restored_pipeline_of_radars_reporting_together_goes_on_exactly(at: int) -> None:
+    """Paper 003's three radars reporting together, with clutter: saved between two radars'
+    batches of one instant (after 5, 13 and 31 batches), a restored tracker counts the instants
+    of its tracks and knows their siblings as the uninterrupted one does."""
+    from clients.scenarios.formation import environment_2, simulate_formations
+
+    sims = simulate_formations(environment_2(3, 6, seed=1, scans=20, synchronized=True))
+    scans = [s.to_scan() for s in sims]
+    assert scans[at].time == scans[at - 1].time
+    a = TrackingPipeline()
+    for s in scans[:at]:
+        a.process(s)
+    b = restarted(a)
+    tracks = a.point.tracks  # type: ignore[attr-defined]
+    assert (tracks.instants < tracks.hits).any() and (tracks.took >= 0).any()
+    for s in scans[at:]:
+        ra, rb = a.process(s), b.process(s)
+        assert rb.deleted == ra.deleted
+        assert tracks_of(b) == tracks_of(a)
 
 
 def test_the_saved_time_keeps_older_scans_out_of_sequence(scans: list[Scan]) -> None:
@@ -308,6 +335,9 @@ SECTION_DEFECTS: list[tuple[str, dict[str, Any], str]] = [
     ("an asymmetric covariance", {"tracks__P_comb": "skew"}, "covariance"),
     ("a candidate covariance", {"candidates__R": "singular"}, "candidate covariance"),
     ("a track later than the time", {"tracks__updated": "late"}, "created <= updated"),
+    ("instants beyond the hits", {"tracks__instants": "more"}, "instants must be from 1"),
+    ("a detection not yet numbered", {"tracks__took": "late"}, "next_serial"),
+    ("a serial counter past its bound", {"values": {"next_serial": 2**63}}, "next_serial"),
 ]
 
 
@@ -341,7 +371,9 @@ def _defect(state: PipelineState, how: dict[str, Any]) -> PipelineState:
         elif spec == "singular":
             v[0] = [[1.0, 1.0], [1.0, 1.0]]
         elif spec == "late":
-            v[0] = 1e9
+            v[0] = 1e9 if v.dtype.kind == "f" else 2**40
+        elif spec == "more":
+            v[0] = a["tracks.hits"][0] + 1
         out[key] = v
     return changed(state, **out)
 
