@@ -137,9 +137,12 @@ def _state_of(d: Any) -> PointTrackState:
         numbers = [float(d[k]) for k in ("time", "score", "created", "updated")]
         tid, hits, confirmed = d["id"], int(d["hits"]), bool(d["confirmed"])
         instants = d.get("instants")  # (an instance of before instants: none)
-        instants = None if instants is None else int(instants)
     except (KeyError, TypeError, ValueError) as exc:
         raise ValueError(f"a track field is missing or not a number: {exc}") from None
+    if instants is not None and (
+        isinstance(instants, bool) or not isinstance(instants, int) or instants < 0
+    ):
+        raise ValueError(f"instants: an integer >= 0 or null, got {instants!r}")
     if not isinstance(tid, str) or not 0 < len(tid) <= 200:
         raise ValueError("id: a string of 1 to 200 characters")
     if x.shape != (5,) or P.shape != (5, 5):

@@ -104,8 +104,9 @@ class TrackArrays(RowArrays):
     x (N, M, 5), P (N, M, 5, 5), mu (N, M): the IMM mode-conditioned estimates and mode
     probabilities; x_comb (N, 5) and P_comb (N, 5, 5) their moment-matched combination.
     ``hits`` counts a track's detections, ``instants`` the distinct times of them (several
-    sensors' batches within :data:`~trackers.initiation.MIN_PAIR_INTERVAL` of one another count
-    once); ``took`` is the serial number of the last detection it took (the tracker numbers
+    sensors' batches of one instant count once: a detection less than
+    :data:`~trackers.initiation.MIN_PAIR_INTERVAL` after the track's previous one adds
+    none); ``took`` is the serial number of the last detection it took (the tracker numbers
     every detection it is given, batch after batch; −1: none), what tells its siblings
     (:func:`_siblings_sharing`).
     ``origin`` numbers the detection a track started from: tracks of one origin are rival
@@ -440,8 +441,9 @@ class IndividualTracker:
             detected = int(np.count_nonzero(look & (tracks.updated == t)))
             # dropped with the deleted tracks below; rivals out of view wait for a scan that
             # looks at them
-            # A sibling that is not the likeliest of its siblings (_siblings_sharing) takes
-            # its detections from the likelier one: it prunes no rival of its own origin.
+            # A sibling that is not the likeliest of its siblings (_siblings_sharing) took
+            # its detection from the likelier one: among the rivals of its own origin it
+            # ranks last, so it prunes none of them and any of them prunes it.
             losers, winners = _sibling_losers(tracks, serial)
             rivals = ~_best_of_each_origin(tracks, losers)
             if seen is not None:
@@ -498,9 +500,7 @@ class IndividualTracker:
         # fast readings both fit (200 m in 1 s under 40 m noise) may hold the wrong one, and
         # confirmed, would be lost at the next detection and coast on as a second track.
         newly = status.confirmed & ~tracks.confirmed & (tracks.instants >= MIN_CONFIRM_INSTANTS)
-        if losers.size:  # the likeliest sibling confirmed: the others were its other readings
-            newly[losers] = False
-            delete[losers[(newly & ~delete)[winners]]] = True
+        newly[losers] = False  # not the likeliest reading of its start: not confirmed now
         # A track with detections of 3 instants or more on a target whose confirmed track lost
         # it (it sped up, braked, turned out of the gate) is that track again, confirmed or not yet
         # (a score of 0 or more: no less likely a target than not): the old id goes on with
@@ -508,10 +508,15 @@ class IndividualTracker:
         young = ~tracks.confirmed & (tracks.instants >= MIN_CONFIRM_INSTANTS) & ~delete
         young &= newly | (tracks.score >= 0.0)
         young[n_old:] = False
-        young[losers] = False  # not the likeliest reading of its start: not confirmed now
+        young[losers] = False
+        tracked = newly & ~delete  # the winners that go on as a confirmed track
         if young.any():
+            before = delete.copy()
             tracks, young, delete = _relinked(tracks, young, delete, t, config, n_old)
+            tracked |= delete & ~before  # merged into the confirmed track they continue
             newly &= ~delete
+        if losers.size:  # the likeliest sibling is tracked: the others were its other readings
+            delete[losers[tracked[winners]]] = True
         deleted_ids = renamed + tuple(tracks.ids[delete & tracks.confirmed].tolist())
         tracks = _frozen(
             _kept(tracks, ~delete, confirmed=newly | tracks.confirmed, born=born, n_old=n_old)
@@ -1245,7 +1250,7 @@ def _handed_in(
         ids[k] = st.id
         created[k] = min(created[k], st.created)
         hits[k] += st.hits  # both instances' detections, over the time since created
-        instants[k] += _instants(st)
+        instants[k] = max(instants[k], _instants(st))  # the same target at the same times
         score[k] = max(score[k], st.score)
         peak[k] = max(peak[k], score[k])
         confirmed[k] = True

@@ -279,11 +279,17 @@ def test_hand_over_records_are_checked() -> None:
     from service.scale_out import _state_dict, _state_of
     from trackers.peers import PointTrackState
 
-    st = PointTrackState("w:T1", 1.0, np.arange(5.0), np.eye(5), 3.0, 4, True, 0.0, 1.0)
+    st = PointTrackState("w:T1", 1.0, np.arange(5.0), np.eye(5), 3.0, 4, True, 0.0, 1.0, 2)
     back = _state_of(orjson.loads(orjson.dumps(_state_dict(st))))
     assert back.id == st.id and np.array_equal(back.x, st.x) and back.hits == 4
+    assert back.instants == 2
     good = _state_dict(st)
+    older = {k: v for k, v in good.items() if k != "instants"}  # an instance of before
+    assert _state_of(older).instants is None
     for bad, text in (
+        ({**good, "instants": -1}, "instants"),
+        ({**good, "instants": True}, "instants"),
+        ({**good, "instants": 2.5}, "instants"),
         ({**good, "x": [1, 2]}, "5 entries"),
         ({**good, "P": (-np.eye(5)).tolist()}, "positive definite"),
         ({**good, "time": float("nan")}, "finite"),

@@ -116,6 +116,16 @@ def test_tracks_of_an_older_file_count_an_instant_a_detection_and_have_no_siblin
     assert len(tracks) and (tracks.instants == tracks.hits).all()
     assert (tracks.took == -1).all()
     assert tracks_of(q) == tracks_of(p)
+    # a file of the first version with instants: its took were rows of the last batch, and
+    # it had no serial counter; they are not read as serials
+    first = _without(p.export_state())
+    values = {k: v for k, v in first.point.values.items() if k != "next_serial"}
+    first = PipelineState(
+        first.last_time, first.point_kind, StateSection(values, first.point.arrays), first.peers
+    )
+    r = TrackingPipeline(TrackerConfig())
+    r.import_state(first)
+    assert (r.point.tracks.took == -1).all()  # type: ignore[attr-defined]
 
 
 @pytest.mark.parametrize("at", [0, 1, 2, 40])
