@@ -18,8 +18,8 @@ One step, for a scan at time t with detections z_j (covariances R_j):
    pair kept starting a tentative track; each free detection becomes a candidate. With
    ``single_point`` each free detection starts a tentative track scored L(1) = ln(λ_nt/λ_fa);
 7. confirmation and deletion by the sequential test (a track is confirmed once it holds
-   detections of three instants at the earliest, :data:`MIN_CONFIRM_INSTANTS`), the drop-from-peak
-   and coasting rules.
+   detections of three instants at the earliest, :data:`MIN_CONFIRM_INSTANTS`), the
+   drop-from-peak and coasting rules.
 """
 
 from __future__ import annotations
@@ -86,8 +86,8 @@ KIND = "individual"
 #: one instant (radars reporting together) tell where the target is, not how it moves.
 MIN_CONFIRM_INSTANTS = 3
 
-#: A confirmed track with detections of this many instants may coast for m* − ½ revisits of its
-#: sensor, however short ``max_coast_time`` (:mod:`trackers.detection_rate`): a GMTI revisiting
+#: A confirmed track with detections of this many instants may coast for m* − ½ revisits of
+#: its sensor, however short ``max_coast_time`` (:mod:`trackers.detection_rate`): a GMTI revisiting
 #: every 10 s misses a vehicle twice in a row now and then (1 % a scan at P_D 0.9), and
 #: ``max_coast_time`` 10 s deleted it at the second miss.
 COAST_MIN_INSTANTS = 5
@@ -389,6 +389,7 @@ class IndividualTracker:
         reach = coast_revisits(pd_coast, tm.p_true_delete)
         longer = reach > MIN_MISSES - 0.5  # a sensor that misses more than P_D 0.9 does
         serial = self._state.next_serial  # this batch's detection j is number serial + j
+        interval = rates.interval(scan.sensor_id)  # the sensor's mean interval between batches
         counters = _Counters(self._state.next_id, self._state.next_origin, self.id_prefix, serial)
 
         released: tuple[PointTrackState, ...] = ()
@@ -431,7 +432,7 @@ class IndividualTracker:
                     tm.max_coast_time,
                     pd_coast,
                     MIN_MISSES - 0.5,
-                    rates.interval(scan.sensor_id),
+                    interval,
                 ) <= tm.max_coast_time
             tracks, claims, range_rates, established, gated = self._update_existing(
                 pred, scan, pd, lam_fa, seen, searching, serial
@@ -439,11 +440,11 @@ class IndividualTracker:
             look = _looks(pred.tracks, seen, masked, t, pd_coast)
             looks = int(np.count_nonzero(look))
             detected = int(np.count_nonzero(look & (tracks.updated == t)))
-            # dropped with the deleted tracks below; rivals out of view wait for a scan that
-            # looks at them
-            # A sibling that is not the likeliest of its siblings (_siblings_sharing) took
-            # its detection from the likelier one: among the rivals of its own origin it
-            # ranks last, so it prunes none of them and any of them prunes it.
+            # Rivals are dropped with the deleted tracks below; those out of view wait for a
+            # scan that looks at them. A sibling that is not the likeliest of its siblings
+            # (_siblings_sharing) took its detection from the likelier one: among the rivals
+            # of its own origin it ranks last, so it prunes none of them and any of them
+            # prunes it.
             losers, winners = _sibling_losers(tracks, serial)
             rivals = ~_best_of_each_origin(tracks, losers)
             if seen is not None:
@@ -484,9 +485,7 @@ class IndividualTracker:
                 revisits[:n_old][crowded] = MIN_MISSES - 0.5
             if idle.size:
                 revisits[idle] = coast_revisits(rates.lowest(tm.pd), tm.p_true_delete)
-        rate = _coast_rate(
-            tracks, tm.max_coast_time, pd_coast, revisits, rates.interval(scan.sensor_id)
-        )
+        rate = _coast_rate(tracks, tm.max_coast_time, pd_coast, revisits, interval)
         if masked.size and (masked < 1.0).any():
             rate[: masked.size] = np.minimum(rate[: masked.size], masked)
         coast = (t - tracks.updated) * rate
@@ -501,10 +500,10 @@ class IndividualTracker:
         # confirmed, would be lost at the next detection and coast on as a second track.
         newly = status.confirmed & ~tracks.confirmed & (tracks.instants >= MIN_CONFIRM_INSTANTS)
         newly[losers] = False  # not the likeliest reading of its start: not confirmed now
-        # A track with detections of 3 instants or more on a target whose confirmed track lost
-        # it (it sped up, braked, turned out of the gate) is that track again, confirmed or not yet
-        # (a score of 0 or more: no less likely a target than not): the old id goes on with
-        # it. Tracks handed back by peers at this scan (rows from n_old on) are left alone.
+        # A track with detections of 3 instants or more on a target whose confirmed track
+        # lost it (it sped up, braked, turned out of the gate) is that track again, confirmed
+        # or not yet (a score of 0 or more: no less likely a target than not): the old id goes
+        # on with it. Tracks handed back by peers at this scan (rows from n_old on) are left alone.
         young = ~tracks.confirmed & (tracks.instants >= MIN_CONFIRM_INSTANTS) & ~delete
         young &= newly | (tracks.score >= 0.0)
         young[n_old:] = False
@@ -1502,10 +1501,9 @@ def _coast_rate(
         min(1, T_coast / (revisits · T̂)),
 
     ``T̂`` its sensor's revisit: as the track saw it (its mean interval between detections
-    ``Δ̄`` of :func:`_mean_gap`, of which a fraction ``P_D`` are detected;
-    for confirmed tracks with detections of at least :data:`COAST_MIN_INSTANTS` instants, as a
-    false track's
-    few hits say little of a revisit), and, for every confirmed track, at least the mean
+    ``Δ̄`` of :func:`_mean_gap`, of which a fraction ``P_D`` are detected; for confirmed
+    tracks with detections of at least :data:`COAST_MIN_INSTANTS` instants, as a false
+    track's few hits say little of a revisit), and, for every confirmed track, at least the mean
     interval ``T_s`` between the scan's sensor's batches (0 while unknown) up to ``Δ̄``:
 
         T̂ = max(P_D Δ̄, min(T_s, Δ̄)).
@@ -1601,8 +1599,8 @@ def _relinked(
 ) -> tuple[TrackArrays, np.ndarray, np.ndarray]:
     """Young tracks (``young``: tentative ones with detections of at least 3 instants that
     are confirmed at this scan or score 0 or more) that continue a confirmed track which lost
-    their target, merged into it: the old track takes the young one's state and detections, goes
-    on under its id, confirmed, with the higher of the two scores as its score and its peak;
+    their target, merged into it: the old track takes the young one's state and detections,
+    goes on under its id, confirmed, with the higher of the two scores as its score and its peak;
     the young one is dropped. Returns the tracks, ``young`` and ``delete`` (the old track
     kept, the young one dropped). Only the first ``n_old`` rows (the tracks before this
     scan's births and hand-backs) take part.
@@ -1758,10 +1756,8 @@ def _siblings_sharing(
     n_det = int(dj.max()) + 1
     code = rank * n_det + np.concatenate([dj[c], dj[rest]])
     rest = rest[np.isin(code[c.size :], code[: c.size])]
-    if rest.size == 0:
-        return none
-    rest = rest[np.lexsort((-gain[rest], ti[rest]))]  # each track's best pair first
-    return rest[np.r_[True, ti[rest][1:] != ti[rest][:-1]]]
+    order, rank = sort_within_groups(ti[rest], gain[rest])  # each track's best pair
+    return rest[order[rank == 0]]
 
 
 def _sibling_losers(tracks: TrackArrays, serial: int) -> tuple[np.ndarray, np.ndarray]:
@@ -1773,14 +1769,12 @@ def _sibling_losers(tracks: TrackArrays, serial: int) -> tuple[np.ndarray, np.nd
     k = np.flatnonzero(~tracks.confirmed & (tracks.took >= serial))
     if k.size < 2:
         return none, none
-    det = tracks.took[k]
-    order = np.lexsort((-tracks.score[k], det))
-    k, det = k[order], det[order]
-    lead = np.r_[True, det[1:] != det[:-1]]
-    if lead.all():  # no two took one detection
+    order, rank = sort_within_groups(tracks.took[k], tracks.score[k])
+    if not rank.any():  # no two took one detection
         return none, none
-    winner = k[lead][np.cumsum(lead) - 1]
-    return k[~lead], winner[~lead]
+    k = k[order]
+    winner = k[np.arange(k.size) - rank]  # each one's group's first, its likeliest
+    return k[rank > 0], winner[rank > 0]
 
 
 def _snapshots(
