@@ -33,11 +33,24 @@ where clutter is dense (there the configured density stands, as before). The flo
 long-quiet area at a 51st of the configured density or more, so that a new false alarm
 there is not a near-certain target.
 A target's detections count too until its track holds three of them, no more.
+
+Detections held back: those a tentative track of three or more detections took are held
+(:meth:`ClutterMap.hold`) until the track's fate is known (:meth:`ClutterMap.settle`). If
+the sequential test deletes it as no target, they were false alarms and count then, in
+their cells and at their own scans' weight ``γ^age``; if it is confirmed, continues a
+confirmed track, or loses to a rival reading of its start, they are dropped. A detection
+two tracks took (siblings) counts once, when its last holder goes, and only if none of them
+was accepted. Without this, a patch of clutter denser than the map believes fed itself: the
+tracks it started took its detections, so the map never learned it (a newcomer's coastal
+radars: 5-10 false alarms a scan in 500 m x 500 m of sea, 4.4-7.0 false tracks a scan,
+the map reading a tenth of the density). Detections waiting for a fate longer than
+:data:`HELD_SCANS` scans of their sensor, or beyond :data:`MAX_HELD`, are dropped.
 """
 
 from __future__ import annotations
 
 from collections import OrderedDict, deque
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -46,7 +59,9 @@ from trackers.association.gating import position_noise
 
 __all__ = [
     "CELL_SIGMAS",
+    "HELD_SCANS",
     "MAX_CELLS",
+    "MAX_HELD",
     "MAX_SENSORS",
     "MEMORY_SCANS",
     "PRIOR_SCANS",
@@ -82,6 +97,12 @@ MAX_SENSORS = 256
 MAX_CELLS = 1 << 14
 #: Cell indices are packed into one int64 key: ix · _STRIDE + iy, each within ±_STRIDE/2.
 _STRIDE = 1 << 31
+
+#: A held-back detection whose track has no fate after this many of its sensor's scans is
+#: dropped (its weight would be below 5 %), ...
+HELD_SCANS = 300
+#: ... and so is the oldest beyond this many.
+MAX_HELD = 1 << 15
 
 _GAMMA = 1.0 - 1.0 / MEMORY_SCANS
 
@@ -144,6 +165,24 @@ class _Grid:
         """The counts of rows ``idx`` of the grid brought to now."""
         return self.counts[idx] * _GAMMA ** (self.scans - self.stamps[idx])
 
+    def add(self, keys: np.ndarray, weights: np.ndarray) -> None:
+        """Add ``weights`` (as of now) to the cells of the distinct packed ``keys``, new
+        cells included."""
+        rows, old = self.find(keys)
+        if old.any():
+            rows = rows[old]
+            self.counts[rows] = self.decayed(rows) + weights[old]
+            self.stamps[rows] = self.scans
+        new = ~old
+        if new.any():
+            merged = np.concatenate([self.keys, keys[new]])
+            order = np.argsort(merged, kind="stable")
+            self.keys = merged[order]
+            self.counts = np.concatenate([self.counts, weights[new]])[order]
+            self.stamps = np.concatenate(
+                [self.stamps, np.full(int(new.sum()), self.scans, dtype=np.int64)]
+            )[order]
+
 
 def _coarsen(grid: _Grid) -> None:
     """The grid with cells twice as wide: each new cell's count is the sum of the four it
@@ -171,6 +210,11 @@ class ClutterMap:
 
     def __init__(self) -> None:
         self._grids: OrderedDict[str, _Grid] = OrderedDict()  # least recently heard first
+        # Held-back detections by serial: [sensor, x, y, the sensor's scan number, its grid,
+        # holders left], oldest first; and each holder's serials.
+        self._held: dict[int, list] = {}
+        self._holding: dict[str, list[int]] = {}
+        self._settled = 0
 
     @staticmethod
     def _cell_side(R: np.ndarray) -> float:
@@ -227,21 +271,7 @@ class ClutterMap:
         lo, hi = z.min(axis=0), z.max(axis=0)
         grid.boxes.append((float(lo[0]), float(lo[1]), float(hi[0]), float(hi[1])))
         keys, n = np.unique(grid.cells(z), return_counts=True)
-        rows, old = grid.find(keys)
-        if old.any():
-            rows = rows[old]
-            # this scan's detections count in full: they are of scan number ``scans``
-            grid.counts[rows] = grid.decayed(rows) + n[old]
-            grid.stamps[rows] = grid.scans
-        new = ~old
-        if new.any():
-            merged = np.concatenate([grid.keys, keys[new]])
-            order = np.argsort(merged, kind="stable")
-            grid.keys = merged[order]
-            grid.counts = np.concatenate([grid.counts, n[new].astype(float)])[order]
-            grid.stamps = np.concatenate(
-                [grid.stamps, np.full(int(new.sum()), grid.scans, dtype=np.int64)]
-            )[order]
+        grid.add(keys, n.astype(float))  # of scan number ``scans``: they count in full
         # Too many cells: four become one (their counts summed), as often as needed. Cells
         # whose count has decayed to nothing are dropped now and then.
         while grid.keys.size > MAX_CELLS:
@@ -253,6 +283,82 @@ class ClutterMap:
                 grid.counts[live],
                 grid.stamps[live],
             )
+
+    def hold(
+        self,
+        sensor_id: str,
+        z: np.ndarray,
+        holders: Sequence[str],
+        serials: Sequence[int],
+    ) -> None:
+        """Hold back detections ``z (k, 2)`` of ``sensor_id``'s scan just learned from, taken
+        by the tentative tracks ``holders`` (one id a row; a detection two tracks took comes
+        twice, with one serial), until :meth:`settle` tells their fate (module docstring)."""
+        grid = self._grids.get(sensor_id)
+        if grid is None or not len(serials):
+            return
+        held, holding = self._held, self._holding
+        for (x, y), holder, serial in zip(
+            np.asarray(z, dtype=float).reshape(-1, 2).tolist(),
+            holders,
+            np.asarray(serials).tolist(),
+            strict=True,
+        ):
+            entry = held.get(serial)
+            if entry is None:
+                held[serial] = entry = [sensor_id, x, y, grid.scans, grid, 0]
+            entry[5] += 1
+            holding.setdefault(holder, []).append(serial)
+        while len(held) > MAX_HELD:
+            del held[next(iter(held))]
+
+    def settle(self, accepted: Sequence[str], rejected: Sequence[str]) -> None:
+        """The fates of tracks that held detections back: ``accepted`` (confirmed, continuing
+        a confirmed track, or a rival reading of a start that another took) drop theirs,
+        ``rejected`` (deleted by the sequential test before confirmation) release theirs,
+        which count as false alarms once no track holds them (module docstring)."""
+        held, holding = self._held, self._holding
+        for holder in accepted:
+            for serial in holding.pop(holder, ()):
+                held.pop(serial, None)
+        late: list[list] = []
+        for holder in rejected:
+            for serial in holding.pop(holder, ()):
+                entry = held.get(serial)
+                if entry is not None:
+                    entry[5] -= 1
+                    if entry[5] <= 0:
+                        late.append(held.pop(serial))
+        if late:
+            self._count_late(late)
+        self._settled += 1
+        if self._settled % 64 == 0:
+            self._drop_stale()
+
+    def _count_late(self, entries: list[list]) -> None:
+        """Count held-back detections in their cells, each weighted as of its scan; those
+        of a sensor whose map was started afresh (or forgotten) since count nowhere."""
+        for grid in {id(e[4]): e[4] for e in entries}.values():
+            mine = [e for e in entries if e[4] is grid]
+            if self._grids.get(mine[0][0]) is not grid:
+                continue
+            z = np.array([e[1:3] for e in mine])
+            weights = _GAMMA ** (grid.scans - np.array([e[3] for e in mine], dtype=float))
+            keys, inverse = np.unique(grid.cells(z), return_inverse=True)
+            grid.add(keys, np.bincount(inverse.ravel(), weights=weights, minlength=keys.size))
+            grid.total += float(weights.sum())
+            while grid.keys.size > MAX_CELLS:
+                _coarsen(grid)
+
+    def _drop_stale(self) -> None:
+        """Forget held-back detections older than :data:`HELD_SCANS` of their sensor's
+        scans, and the holders left with none."""
+        held = self._held
+        stale = [s for s, e in held.items() if e[4].scans - e[3] > HELD_SCANS]
+        for serial in stale:
+            del held[serial]
+        holding = {h: [s for s in serials if s in held] for h, serials in self._holding.items()}
+        self._holding = {h: serials for h, serials in holding.items() if serials}
 
     def cell_side(self, sensor_id: str) -> float | None:
         """The side (m) of a sensor's cells, ``None`` before its first detection."""

@@ -56,7 +56,13 @@ from trackers.initiation import (
 )
 from trackers.models.measurement import H_POSITION, MIN_RANGE, range_rate_innovation
 from trackers.models.motion import STATE_DIM, build_models
-from trackers.peers import PointDirectives, PointProposal, PointTrackState, PointTrackView
+from trackers.peers import (
+    HeldDetections,
+    PointDirectives,
+    PointProposal,
+    PointTrackState,
+    PointTrackView,
+)
 from trackers.rows import RowArrays, sort_within_groups
 from trackers.scoring import (
     hit_increment,
@@ -411,6 +417,7 @@ class IndividualTracker:
         seen: np.ndarray | None = None  # old tracks in the scan's view (None: all)
         range_rates = (0, 0)
         established = np.zeros(scan.size, dtype=bool)
+        held = HeldDetections.none()
         looks = detected = 0
         gated = (np.zeros(0, dtype=np.intp), np.zeros(0, dtype=np.intp))
         if len(tracks):
@@ -434,7 +441,7 @@ class IndividualTracker:
                     MIN_MISSES - 0.5,
                     interval,
                 ) <= tm.max_coast_time
-            tracks, claims, range_rates, established, gated = self._update_existing(
+            tracks, claims, range_rates, established, gated, held = self._update_existing(
                 pred, scan, pd, lam_fa, seen, searching, serial
             )
             look = _looks(pred.tracks, seen, masked, t, pd_coast)
@@ -494,6 +501,7 @@ class IndividualTracker:
         delete[n_old:] = False  # a track is never deleted in the scan that starts or adopts it
         if idle.size:  # out of view: their scores stand, only coasting ends them
             delete[idle] &= coast[idle] > tm.max_coast_time
+        tested = delete.copy()  # deleted by the sequential test (or coasting out of view)
         delete[:n_old] |= rivals  # tentative, so not among the deleted ids
         # Two detections say that a target is there, not how it moves: a pair whose slow and
         # fast readings both fit (200 m in 1 s under 40 m noise) may hold the wrong one, and
@@ -517,6 +525,13 @@ class IndividualTracker:
         if losers.size:  # the likeliest sibling is tracked: the others were its other readings
             delete[losers[tracked[winners]]] = True
         deleted_ids = renamed + tuple(tracks.ids[delete & tracks.confirmed].tolist())
+        # The fates of the tracks that held detections back from the clutter map: no target
+        # (the test deleted a tentative track), or a target's or another reading's (confirmed
+        # now, merged into a confirmed track, a rival or sibling that lost).
+        fates = (
+            tuple(tracks.ids[(newly & ~delete) | (delete & ~tested)].tolist()),
+            tuple(tracks.ids[tested & ~tracks.confirmed].tolist()),
+        )
         tracks = _frozen(
             _kept(tracks, ~delete, confirmed=newly | tracks.confirmed, born=born, n_old=n_old)
         )
@@ -547,6 +562,9 @@ class IndividualTracker:
             released=released,
             state=(self._version, state),
             clutter=(claims < np.inf) & ~established,
+            held=held,
+            accepted=fates[0],
+            rejected=fates[1],
         )
 
     def _update_existing(
@@ -558,7 +576,14 @@ class IndividualTracker:
         seen: np.ndarray | None,
         searching: np.ndarray | None,
         serial: int,
-    ) -> tuple[TrackArrays, np.ndarray, tuple[int, int], np.ndarray, tuple[np.ndarray, np.ndarray]]:
+    ) -> tuple[
+        TrackArrays,
+        np.ndarray,
+        tuple[int, int],
+        np.ndarray,
+        tuple[np.ndarray, np.ndarray],
+        HeldDetections,
+    ]:
         """The tracks updated with this scan (``pd`` the detection probability of each), and
         each detection's *claim* (``lam_fa`` the false-alarm density, one or one a detection):
         ``+inf`` where a confirmed track took it or has it in its
@@ -568,8 +593,9 @@ class IndividualTracker:
         number of range-rates of the detections confirmed tracks took, and of those used
         (inside their gate), the detections taken by tracks of at least
         :data:`ESTABLISHED_HITS` detections (whatever their instants: a target's, not
-        clutter), and the gated pairs (track and detection
-        indices)."""
+        clutter), the gated pairs (track and detection indices), and those of the taken
+        detections that tentative tracks of that many detections hold back from the clutter
+        map (:class:`~trackers.peers.HeldDetections`)."""
         config, tracks = pred.config, pred.tracks
         x_pred, P_pred, c_bar, xc, Pc = pred.x_pred, pred.P_pred, pred.c_bar, pred.xc, pred.Pc
         pairs = gate(xc[:, :2], Pc[:, :2, :2], scan.z, scan.R, config.gating.threshold)
@@ -646,6 +672,10 @@ class IndividualTracker:
         # track's status (a group of young targets is not clutter).
         established = np.zeros(scan.size, dtype=bool)
         established[ad[hits[at] >= ESTABLISHED_HITS]] = True
+        hold = np.flatnonzero((hits[at] >= ESTABLISHED_HITS) & ~tracks.confirmed[at])
+        held = HeldDetections(
+            rows=ad[hold], holders=tuple(tracks.ids[at[hold]].tolist()), serials=serial + ad[hold]
+        )
         claims[dj[tracks.confirmed[ti]]] = np.inf  # a confirmed track's detections included
         if found is not None:
             claims[found.detection] = np.inf
@@ -664,7 +694,7 @@ class IndividualTracker:
             detection_ids=det_ids,
             took=took,
         )
-        return new, claims, range_rates, established, (ti, dj)
+        return new, claims, range_rates, established, (ti, dj), held
 
     def _initiate_two_point(
         self,

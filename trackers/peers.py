@@ -55,6 +55,7 @@ if TYPE_CHECKING:
     from trackers.config import TrackerConfig
 
 __all__ = [
+    "HeldDetections",
     "PeerError",
     "PeerProposal",
     "PeerTracker",
@@ -307,17 +308,38 @@ class PointDirectives:
 
 
 @dataclass(frozen=True, eq=False)
+class HeldDetections:
+    """Detections of a scan that tentative tracks hold back from the clutter map until their
+    fate is known (:mod:`trackers.clutter`): ``rows`` of the point tracker's scan, the id of
+    the track holding each (``holders``) and each detection's ``serials`` (unique across
+    scans; a detection two tracks took comes twice, with one serial)."""
+
+    rows: np.ndarray
+    holders: tuple[str, ...]
+    serials: np.ndarray
+
+    @staticmethod
+    def none() -> HeldDetections:
+        return HeldDetections(np.zeros(0, dtype=np.intp), (), np.zeros(0, dtype=np.int64))
+
+
+@dataclass(frozen=True, eq=False)
 class PointProposal:
     """A point tracker's proposed step: ``result`` is what the step returns once committed,
     ``released`` the states of the tracks the peers took; ``state`` is private to the tracker.
     ``clutter``, when the tracker says, marks the scan's detections that no confirmed track
     took or had in its gate and no track of three or more detections took (what the
-    pipeline's clutter map counts)."""
+    pipeline's clutter map counts); ``held`` are those of the last kind that tentative tracks
+    took, and ``accepted`` and ``rejected`` the ids of the tracks whose held detections are
+    now known to be a target's (or another reading's of one) or false alarms."""
 
     result: StepResult
     released: tuple[PointTrackState, ...]
     state: Any
     clutter: np.ndarray | None = None
+    held: HeldDetections = field(default_factory=HeldDetections.none)
+    accepted: tuple[str, ...] = ()
+    rejected: tuple[str, ...] = ()
 
 
 class PointTracker(Protocol):

@@ -321,6 +321,12 @@ class TrackingPipeline:
             mask = point.clutter
             clutter = rows if mask is None else rows[np.asarray(mask, dtype=bool)]
             self._clutter.learn(scan.sensor_id, scan.z.take(clutter, axis=0), scan.R)
+            held = point.held
+            if held.rows.size:
+                z = scan.z.take(rows.take(held.rows), axis=0)
+                self._clutter.hold(scan.sensor_id, z, held.holders, held.serials)
+        if point.accepted or point.rejected:
+            self._clutter.settle(point.accepted, point.rejected)
 
     def process(self, scan: Scan) -> StepResult:
         """Run one scan through every tracker. Raise ``ScanRejected`` for an unusable scan and

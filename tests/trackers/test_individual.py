@@ -730,3 +730,36 @@ def test_a_track_missed_by_empty_scans_with_the_clutter_map_coasts_as_long():
         ):
             break
     assert k - 80 == 5
+
+
+def _proposals(tr, scans):
+    out = []
+    for s in scans:
+        p = tr.propose(s)
+        tr.commit(p)
+        out.append(p)
+    return out
+
+
+def test_tentative_tracks_hold_their_detections_until_the_test_decides():
+    """From its third detection a tentative track holds the detections it takes back from the
+    clutter map (``held``, with their serial numbers); the test deleting it before it is
+    confirmed lists it as ``rejected``, its confirmation as ``accepted``."""
+    # clutter dense enough that three detections in a row confirm no track
+    tr = IndividualTracker(TrackerConfig())
+    steps = [scan_at(k, [100.0 + 10.0 * k, 0.0], lam=3e-5) for k in range(3)]
+    props = _proposals(tr, steps)
+    assert props[0].held.rows.size == 0 and props[1].held.rows.size == 0  # 1, 2 detections
+    held = props[2].held
+    assert held.rows.tolist() == [0] and held.holders == ("T1",)
+    assert held.serials.tolist() == [2]  # the third detection given to the tracker
+    assert not any(p.accepted or p.rejected for p in props)
+    misses = _proposals(tr, [scan_at(3 + k, [], lam=3e-5) for k in range(10)])
+    assert [p.rejected for p in misses if p.rejected] == [("T1",)]
+    assert not tr.snapshot()
+    # sparse clutter: the third detection confirms it, and it is accepted then
+    tr = IndividualTracker(TrackerConfig())
+    props = _proposals(tr, [scan_at(k, [100.0 + 10.0 * k, 0.0], lam=1e-9) for k in range(4)])
+    confirmed_at = next(i for i, p in enumerate(props) if p.result.confirmed())
+    assert props[confirmed_at].accepted == ("T1",)
+    assert not any(p.rejected for p in props)
