@@ -36,6 +36,7 @@ import numpy as np
 
 from clients.scenarios.airspace import PolarRadar, radar_hits, radar_scan
 from clients.scenarios.multitarget import SimulatedScan
+from trackers.evaluation.crb import straight_line_velocity_bound
 from trackers.evaluation.effective_rate import EffectiveRateCounter
 
 __all__ = [
@@ -230,7 +231,11 @@ class FormationFigures:
     false confirmed tracks per batch, position and velocity RMS errors over the held
     target-scans (m, m/s) and per scan time (for the plots), the id changes of every target,
     the formation peer's median time per batch and formation (ms), and the formation tracks
-    seen at the end."""
+    seen at the end. ``velocity_bound`` is the RMS over the same target-scans of the
+    Cramér-Rao bound of any unbiased estimator of a lone target's velocity from its
+    detections so far (straight-line motion, known noise: :func:`velocity_bounds`);
+    ``formation_velocity_bound`` that of its formation's common velocity, the members known
+    from their first detections."""
 
     rate: float
     false_per_batch: float
@@ -242,6 +247,41 @@ class FormationFigures:
     formation_ms: float | None
     formations_at_end: int
     tracks_by_time: tuple[tuple[float, tuple[tuple[str, float, float], ...]], ...]
+    velocity_bound: float = math.nan
+    formation_velocity_bound: float = math.nan
+
+
+def velocity_bounds(
+    scenario: FormationScenario, sims: list[SimulatedScan], at: list[tuple[int, float]]
+) -> tuple[float, float]:
+    """The RMS over the target-scans ``at`` ((target id, time) pairs) of the Cramér-Rao
+    bounds on the velocity (:func:`~trackers.evaluation.crb.straight_line_velocity_bound`)
+    of each target alone and of its formation's common velocity (the targets move in
+    straight lines in environments 1 and 2: no process noise), from the detections of the
+    target (its formation's) made up to that time; ``nan`` without target-scans."""
+    if not at:
+        return math.nan, math.nan
+    t = np.concatenate([np.full(s.target_of_detection.size, s.time) for s in sims])
+    R = np.concatenate([s.R for s in sims])
+    owner = np.concatenate([s.target_of_detection for s in sims])
+    pairs = np.array(at, dtype=float)
+    alone = np.zeros(len(at))
+    together = np.zeros(len(at))
+    for group in scenario.groups:
+        ids = np.array(group)
+        for target in group:
+            rows = np.flatnonzero(pairs[:, 0] == target)
+            mine = owner == target
+            alone[rows] = straight_line_velocity_bound(
+                t[mine], R[mine], np.zeros(int(mine.sum())), 1, pairs[rows, 1]
+            )
+        rows = np.flatnonzero(np.isin(pairs[:, 0], ids))
+        theirs = np.isin(owner, ids)
+        member = np.searchsorted(ids, owner[theirs])
+        together[rows] = straight_line_velocity_bound(
+            t[theirs], R[theirs], member, ids.size, pairs[rows, 1]
+        )
+    return float(np.sqrt(np.mean(alone))), float(np.sqrt(np.mean(together)))
 
 
 def noise_sigma(
@@ -281,6 +321,7 @@ def run_figures(
     changes = 0
     err_p: dict[float, list[float]] = {}
     err_v: dict[float, list[float]] = {}
+    held_at: list[tuple[int, float]] = []
     tracks_by_time = []
     formations_at_end = 0
     try:
@@ -307,6 +348,7 @@ def run_figures(
                     err_v.setdefault(sim.time, []).append(
                         float(np.sum((np.asarray(t.velocity) - X[i, 2:]) ** 2))
                     )
+                    held_at.append((target, sim.time))
             previous = pairs
             tracks_by_time.append(
                 (sim.time, tuple((t.id, float(t.position[0]), float(t.position[1])) for t in conf))
@@ -317,6 +359,7 @@ def run_figures(
     res = counter.result()
     all_p = [e for v in err_p.values() for e in v]
     all_v = [e for v in err_v.values() for e in v]
+    bound, formation_bound = velocity_bounds(scenario, sims, held_at)
     return FormationFigures(
         rate=res.rate,
         false_per_batch=res.false_per_scan,
@@ -328,4 +371,6 @@ def run_figures(
         formation_ms=float(np.median(costs)) if costs else None,
         formations_at_end=formations_at_end,
         tracks_by_time=tuple(tracks_by_time),
+        velocity_bound=bound,
+        formation_velocity_bound=formation_bound,
     )

@@ -18,7 +18,13 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["POSITION_H", "cv_matrices", "cv_position_bound", "pcrb_linear"]
+__all__ = [
+    "POSITION_H",
+    "cv_matrices",
+    "cv_position_bound",
+    "pcrb_linear",
+    "straight_line_velocity_bound",
+]
 
 POSITION_H = np.array([[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0]])
 """Position measurement matrix for the state ``[x, y, vx, vy]``."""
@@ -117,4 +123,60 @@ def cv_position_bound(
     if n_scans > 1:
         J = pcrb_linear(F, Q, POSITION_H, sigma**2 * np.eye(2), np.linalg.inv(P0), n_scans - 1)
         out[1:] = np.sqrt(J[:, 0, 0] + J[:, 1, 1])
+    return out
+
+
+def straight_line_velocity_bound(
+    t: np.ndarray,
+    R: np.ndarray,
+    member: np.ndarray,
+    n_members: int,
+    t_query: np.ndarray,
+) -> np.ndarray:
+    """Cramér–Rao bound on the velocity, ``tr Cov(v̂)`` (m²/s²), at each of ``t_query``, for
+    ``n_members`` targets moving in straight lines with one common velocity (no process
+    noise, no prior), from the position measurements made up to that time: measurement
+    ``k`` at ``t[k]`` with covariance ``R[k] (2, 2)`` of member ``member[k]``. One member
+    bounds a lone target's velocity; several, a rigid formation's, its members known.
+
+    The parameters are the members' positions at ``t = 0`` and the velocity,
+    ``θ = [p₁, …, p_N, v]``, measured as ``z_k = p_{m_k} + t_k v + w_k``, so that with
+    ``A_k = [0 … I … 0, t_k I]`` the Fisher information of the measurements up to ``τ`` is::
+
+        J(τ) = Σ_{t_k ≤ τ} A_kᵀ R_k⁻¹ A_k,     Cov(v̂) ≥ [J(τ)⁻¹]_vv
+
+    A query time before the information determines ``θ`` (every member measured at two
+    times at least) gives ``inf``."""
+    t = np.asarray(t, dtype=float).reshape(-1)
+    R = np.asarray(R, dtype=float).reshape(-1, 2, 2)
+    member = np.asarray(member, dtype=np.intp).reshape(-1)
+    t_query = np.asarray(t_query, dtype=float).reshape(-1)
+    if not (t.size == R.shape[0] == member.size):
+        raise ValueError("t, R and member must have one entry a measurement")
+    if n_members < 1 or (member.size and not (member.min() >= 0 and member.max() < n_members)):
+        raise ValueError("member must index 0 .. n_members - 1")
+    d = 2 * n_members + 2
+    order = np.argsort(t, kind="stable")
+    t, R, member = t[order], R[order], member[order]
+    A = np.zeros((t.size, 2, d))
+    rows = np.arange(t.size)
+    A[rows, 0, 2 * member] = 1.0
+    A[rows, 1, 2 * member + 1] = 1.0
+    A[:, 0, d - 2] = A[:, 1, d - 1] = t
+    info = np.cumsum(np.transpose(A, (0, 2, 1)) @ np.linalg.inv(R) @ A, axis=0)
+    upto = np.searchsorted(t, t_query, side="right") - 1
+    out = np.full(t_query.size, np.inf)
+    for i, k in enumerate(upto.tolist()):
+        if k < 0:
+            continue
+        J = info[k]
+        diagonal = np.diag(J)
+        if not np.all(diagonal > 0.0):
+            continue  # a member not measured yet
+        scale = 1.0 / np.sqrt(diagonal)  # so that the rank test reads geometry, not units
+        Js = J * scale[:, None] * scale[None, :]
+        if np.linalg.cond(Js) > 1e12:
+            continue
+        cov = np.linalg.inv(Js) * scale[:, None] * scale[None, :]
+        out[i] = cov[d - 2, d - 2] + cov[d - 1, d - 1]
     return out

@@ -8,7 +8,12 @@ import numpy as np
 import pytest
 from scipy.linalg import solve_discrete_are
 
-from trackers.evaluation.crb import POSITION_H, cv_matrices, pcrb_linear
+from trackers.evaluation.crb import (
+    POSITION_H,
+    cv_matrices,
+    pcrb_linear,
+    straight_line_velocity_bound,
+)
 
 
 def kalman_covariances(
@@ -97,3 +102,33 @@ def test_cv_position_bound_starts_at_the_detection_and_settles():
     assert np.all(np.diff(b[1:]) <= 1e-12)  # the bound only tightens after the first update
     assert b[-1] == pytest.approx(b[-2], rel=1e-6)  # steady state
     assert b[-1] < 5.0  # filtering beats a single detection's √2 σ
+
+
+def test_straight_line_velocity_bound_is_the_least_squares_slope_variance() -> None:
+    """N measurements T apart with noise σ² I: the slope of a least-squares line has variance
+    12 σ² / (N (N² − 1) T²) per axis; two members measured alike, with a common velocity,
+    halve it; before a second time there is no bound (inf)."""
+    sigma, T, N = 30.0, 2.0, 12
+    t = T * np.arange(N)
+    R = np.tile(sigma**2 * np.eye(2), (N, 1, 1))
+    queries = t + 0.5
+    got = straight_line_velocity_bound(t, R, np.zeros(N), 1, queries)
+    n = np.arange(1, N + 1)
+    with np.errstate(divide="ignore"):
+        expected = 2 * 12 * sigma**2 / (n * (n**2 - 1) * T**2)
+    assert got[0] == np.inf and np.allclose(got[1:], expected[1:])
+    assert straight_line_velocity_bound(t, R, np.zeros(N), 1, [-1.0])[0] == np.inf
+    # a second member measured at the same times (in any order): half the variance
+    both = straight_line_velocity_bound(
+        np.concatenate([t, t[::-1]]),
+        np.concatenate([R, R]),
+        np.repeat([0, 1], N),
+        2,
+        queries,
+    )
+    assert both[1] == np.inf or np.isclose(both[1], 0.5 * expected[1])
+    assert np.allclose(both[2:], 0.5 * expected[2:])
+    with pytest.raises(ValueError):
+        straight_line_velocity_bound(t, R, np.full(N, 2), 2, queries)
+    with pytest.raises(ValueError):
+        straight_line_velocity_bound(t, R[:-1], np.zeros(N), 1, queries)

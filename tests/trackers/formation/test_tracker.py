@@ -90,6 +90,9 @@ def test_paper_003_environment_1_forms_both_formations_and_holds_every_target() 
     figures = run_figures(environment_1(seed=0, scans=40), p)
     assert figures.formations_at_end == 2
     assert figures.rate >= 0.99 and figures.rms_position < 40.0
+    # the bounds on the velocity error: a formation's common velocity is known better than
+    # each member's alone (four members: about half the RMS)
+    assert 0.4 < figures.formation_velocity_bound / figures.velocity_bound < 0.6
     tracks = p.snapshot()
     formations = [t for t in tracks if t.kind == "formation"]
     for f in formations:
