@@ -400,9 +400,11 @@ class ExtendedConfig:
     split into subsets whose members are less than ``resolution_distance`` apart; the likeliest
     union of subsets is the track's. A cluster of at least ``min_detections`` detections, found
     in ``birth_scans`` scans in a row spanning ``birth_time`` and moving as one (no faster than
-    ``max_speed``), starts a track; until then an object's detections may confirm individual
-    tracks, which the new track absorbs. Individual tracks inside a track's resolution cell (its
-    extent grown by half the resolution distance) have detection probability ``in_cell_pd``;
+    ``max_speed``), starts a track (a scan of another sensor than the one that saw the cluster
+    last does not break the row when it misses it); until then an object's detections may
+    confirm individual tracks, which the new track absorbs. Individual tracks inside a track's
+    resolution cell (its extent grown by half the resolution distance) have detection
+    probability ``in_cell_pd``;
     those inside its extent that move with it (velocities within ``group_speed_spread``) for
     3 scans, and those its own detections started (in its cell, created since its cluster was
     first seen, never seen coming from outside), are absorbed. A track is deleted like an

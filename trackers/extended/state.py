@@ -70,6 +70,7 @@ class ExtendedCheckpoint:
         arrays["candidates.time"] = np.array([c.time for c in cands], dtype=float)
         arrays["candidates.seen"] = np.array([c.seen for c in cands], dtype=np.int64)
         arrays["candidates.sums"] = np.array([c.sums for c in cands], dtype=float).reshape(k, 7)
+        put_strings(arrays, "candidates.sensors", [c.sensor for c in cands])
         put_strings(arrays, "absorbing.ids", [tid for tid, _ in st.absorbing])
         put_strings(arrays, "noise.sensors", [e[0] for e in st.noise])
         arrays["noise.sigma"] = np.array([e[1] for e in st.noise], dtype=float)
@@ -132,6 +133,10 @@ def read_state(section: StateSection, base: _State, id_prefix: str = "") -> _Sta
     c_time = r.floats("candidates.time", (k,))
     c_seen = r.integers("candidates.seen", (k,), ge=1)
     c_sums = r.floats("candidates.sums", (k, 7))
+    # files written before runs knew their sensor: any sensor's miss ends them
+    c_sensors = [""] * k
+    if r.has("candidates.sensors.len"):
+        c_sensors = [s or "" for s in r.strings("candidates.sensors", k)]
     absorbing_ids = [s or "" for s in r.strings("absorbing.ids", a)]
     absorbing_scans = r.integers("absorbing.scans", (a,), ge=0)
     noise: tuple[tuple[str, float, float], ...] = ()
@@ -205,6 +210,7 @@ def read_state(section: StateSection, base: _State, id_prefix: str = "") -> _Sta
             float(c_time[j]),
             int(c_seen[j]),
             tuple(float(v) for v in c_sums[j]),  # type: ignore[arg-type]
+            c_sensors[j],
         )
         for j in range(k)
     )

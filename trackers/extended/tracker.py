@@ -209,7 +209,11 @@ class _Candidate(NamedTuple):
     """A cluster seen in consecutive scans, not yet a track: its latest centroid, and the
     sums for the least-squares line ``c(t) = a + v (t − t₀)`` through its centroids (a
     cluster of clutter jitters by tens of metres a scan: a velocity from two centroids would
-    be off by tens of m/s). A tuple of plain floats: a scan makes and drops many of these."""
+    be off by tens of m/s). A tuple of plain floats: a scan makes and drops many of these.
+    ``sensor`` saw it last: a scan of another sensor that does not see it leaves the run
+    unbroken (each sensor resolves an object's returns its own way: a ship's scatterers,
+    strung together for one radar, are as many lone points for a second one that looks
+    along the ship)."""
 
     centroid: tuple[float, float]
     first_time: float
@@ -217,18 +221,25 @@ class _Candidate(NamedTuple):
     seen: int
     #: Σ1, Στ, Στ², Σcx, Σcy, Στcx, Στcy over the centroids seen, τ = t − first_time.
     sums: tuple[float, float, float, float, float, float, float]
+    #: The sensor whose scan saw it last ("": not known, a file of an earlier version).
+    sensor: str = ""
 
     @classmethod
-    def first(cls, centroid: tuple[float, float], t: float) -> _Candidate:
+    def first(cls, centroid: tuple[float, float], t: float, sensor: str = "") -> _Candidate:
         cx, cy = centroid
-        return cls((cx, cy), t, t, 1, (1.0, 0.0, 0.0, cx, cy, 0.0, 0.0))
+        return cls((cx, cy), t, t, 1, (1.0, 0.0, 0.0, cx, cy, 0.0, 0.0), sensor)
 
-    def seen_again(self, centroid: tuple[float, float], t: float) -> _Candidate:
+    def seen_again(self, centroid: tuple[float, float], t: float, sensor: str) -> _Candidate:
         n, s1, s2, sx, sy, tx, ty = self.sums
         cx, cy = centroid
         tau = t - self.first_time
         sums = (n + 1.0, s1 + tau, s2 + tau * tau, sx + cx, sy + cy, tx + tau * cx, ty + tau * cy)
-        return _Candidate((cx, cy), self.first_time, t, self.seen + 1, sums)
+        return _Candidate((cx, cy), self.first_time, t, self.seen + 1, sums, sensor)
+
+    def broken_by(self, sensor: str) -> bool:
+        """Whether a scan of ``sensor`` that does not see the run ends it: a scan of the
+        sensor that saw it last (or of any, when that is not known)."""
+        return not self.sensor or self.sensor == sensor
 
     @property
     def velocity(self) -> np.ndarray:
@@ -736,7 +747,13 @@ class ExtendedTracker(SavesImmutableState):
                         alpha=2.0 + len(chosen),
                     )
             n = len(chosen)
-            gamma = max(MIN_GAMMA, track.gamma + GAMMA_GAIN * (n - track.gamma))
+            # γ is learned from the scans that gave the track detections: learned from its
+            # misses too, it fell with each (γ ← 0.8 γ), so that a track's misses cost at
+            # most 5 γ in all, less than delete_drop_from_peak for γ < 3: a split-off pair of
+            # clutter detections coasted, confirmed, for all of max_coast_time.
+            gamma = track.gamma
+            if n:
+                gamma = max(MIN_GAMMA, gamma + GAMMA_GAIN * (n - gamma))
             chosen = np.array(chosen, dtype=np.intp)
             if n:
                 claimed[chosen] = True
@@ -877,6 +894,8 @@ class ExtendedTracker(SavesImmutableState):
                 continue
             px, py = cand.predicted(t)
             if not clusters:
+                if not cand.broken_by(scan.sensor_id):
+                    candidates.append(cand)
                 continue
             reach = cfg.resolution_distance + (
                 cfg.max_speed * dt if cand.seen == 1 else 2.0 * cfg.group_speed_spread * dt
@@ -886,15 +905,17 @@ class ExtendedTracker(SavesImmutableState):
                 d = math.hypot(cx - px, cy - py)
                 if d <= best_d and match[k] is None:
                     best, best_d = k, d
-            if best >= 0:  # else not seen this scan: the run is broken
+            if best >= 0:
                 match[best] = cand
+            elif not cand.broken_by(scan.sensor_id):  # another sensor's miss: it goes on
+                candidates.append(cand)
         born: list[tuple[ExtendedTrack, np.ndarray]] = []
         ripe: list[tuple[np.ndarray, _Candidate]] = []
         for k, centroid in enumerate(centroids):
             cand = match[k]
-            run = None if cand is None else cand.seen_again(centroid, t)
+            run = None if cand is None else cand.seen_again(centroid, t, scan.sensor_id)
             if run is None or math.hypot(*run.slope()) > cfg.max_speed:
-                candidates.append(_Candidate.first(centroid, t))
+                candidates.append(_Candidate.first(centroid, t, scan.sensor_id))
             elif run.seen >= cfg.birth_scans and t - run.first_time >= cfg.birth_time:
                 ripe.append((subsets[k], run))
             else:
@@ -915,7 +936,7 @@ class ExtendedTracker(SavesImmutableState):
         kept = _not_acquiring(kept, view, scan)
         for rows, (_, run) in zip(kept, ripe, strict=True):
             if rows.size < cfg.min_detections:
-                candidates.append(_Candidate.first(run.centroid, t))
+                candidates.append(_Candidate.first(run.centroid, t, scan.sensor_id))
                 continue
             track = _born(
                 f"{self.id_prefix}E{next_id}",
