@@ -43,8 +43,10 @@ two tracks took (siblings) counts once, when its last holder goes, and only if n
 was accepted. Without this, a patch of clutter denser than the map believes fed itself: the
 tracks it started took its detections, so the map never learned it (a newcomer's coastal
 radars: 5-10 false alarms a scan in 500 m x 500 m of sea, 4.4-7.0 false tracks a scan,
-the map reading a tenth of the density). Detections waiting for a fate longer than
-:data:`HELD_SCANS` scans of their sensor, or beyond :data:`MAX_HELD`, are dropped.
+the map reading a thirtieth of the density). The held-back detections of tracks that go
+without a verdict (handed over, taken by a peer, coasted out of view) are forgotten, as are
+those waiting longer than :data:`HELD_SCANS` scans of their sensor, or of a sensor whose map
+was started afresh, and the oldest beyond :data:`MAX_HELD`.
 """
 
 from __future__ import annotations
@@ -309,8 +311,8 @@ class ClutterMap:
                 held[serial] = entry = [sensor_id, x, y, grid.scans, grid, 0]
             entry[5] += 1
             holding.setdefault(holder, []).append(serial)
-        while len(held) > MAX_HELD:
-            del held[next(iter(held))]
+        if len(held) > MAX_HELD:  # the oldest quarter goes at once (amortized O(1))
+            self._held = dict(list(held.items())[len(held) - 3 * MAX_HELD // 4 :])
 
     def settle(self, accepted: Sequence[str], rejected: Sequence[str]) -> None:
         """The fates of tracks that held detections back: ``accepted`` (confirmed, continuing
@@ -350,11 +352,21 @@ class ClutterMap:
             while grid.keys.size > MAX_CELLS:
                 _coarsen(grid)
 
+    def forget_held(self) -> None:
+        """Drop every held-back detection (the tracks that held them are gone: a state
+        restored)."""
+        self._held, self._holding = {}, {}
+
     def _drop_stale(self) -> None:
         """Forget held-back detections older than :data:`HELD_SCANS` of their sensor's
-        scans, and the holders left with none."""
-        held = self._held
-        stale = [s for s, e in held.items() if e[4].scans - e[3] > HELD_SCANS]
+        scans or of a sensor whose map was started afresh or forgotten since, and the
+        holders left with none."""
+        held, grids = self._held, self._grids
+        stale = [
+            s
+            for s, e in held.items()
+            if grids.get(e[0]) is not e[4] or e[4].scans - e[3] > HELD_SCANS
+        ]
         for serial in stale:
             del held[serial]
         holding = {h: [s for s in serials if s in held] for h, serials in self._holding.items()}

@@ -501,7 +501,9 @@ class IndividualTracker:
         delete[n_old:] = False  # a track is never deleted in the scan that starts or adopts it
         if idle.size:  # out of view: their scores stand, only coasting ends them
             delete[idle] &= coast[idle] > tm.max_coast_time
-        tested = delete.copy()  # deleted by the sequential test (or coasting out of view)
+        tested = delete.copy()  # deleted by the sequential test
+        if idle.size:
+            tested[idle] = False  # coasted out of view: no verdict on its detections
         delete[:n_old] |= rivals  # tentative, so not among the deleted ids
         # Two detections say that a target is there, not how it moves: a pair whose slow and
         # fast readings both fit (200 m in 1 s under 40 m noise) may hold the wrong one, and
@@ -672,13 +674,17 @@ class IndividualTracker:
         # track's status (a group of young targets is not clutter).
         established = np.zeros(scan.size, dtype=bool)
         established[ad[hits[at] >= ESTABLISHED_HITS]] = True
-        hold = np.flatnonzero((hits[at] >= ESTABLISHED_HITS) & ~tracks.confirmed[at])
-        held = HeldDetections(
-            rows=ad[hold], holders=tuple(tracks.ids[at[hold]].tolist()), serials=serial + ad[hold]
-        )
         claims[dj[tracks.confirmed[ti]]] = np.inf  # a confirmed track's detections included
         if found is not None:
             claims[found.detection] = np.inf
+        # Of those, what the map would count but for the tentative track that took it: held
+        # back until the test decides on that track (none in a confirmed track's gate).
+        hold = np.flatnonzero(
+            (hits[at] >= ESTABLISHED_HITS) & ~tracks.confirmed[at] & (claims[ad] < np.inf)
+        )
+        held = HeldDetections(
+            rows=ad[hold], holders=tuple(tracks.ids[at[hold]].tolist()), serials=serial + ad[hold]
+        )
         new = replace(
             tracks,
             x=x,

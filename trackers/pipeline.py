@@ -447,6 +447,9 @@ class TrackingPipeline:
         for tracker, value in checked:
             tracker.restore_state(value)
         self._last_time = last
+        # the detections tentative tracks held back belong to tracks and serial numbers of
+        # the state left: the restored tracker gives those numbers and ids again
+        self._clutter.forget_held()
 
     def snapshot(self) -> tuple[TrackSnapshot, ...]:
         """Every live track of every kind, as of the last processed scan."""

@@ -277,7 +277,8 @@ def velocity_bounds(
             )
         rows = np.flatnonzero(np.isin(pairs[:, 0], ids))
         theirs = np.isin(owner, ids)
-        member = np.searchsorted(ids, owner[theirs])
+        index = {int(target): i for i, target in enumerate(group)}
+        member = np.array([index[int(o)] for o in owner[theirs]], dtype=np.intp)
         together[rows] = straight_line_velocity_bound(
             t[theirs], R[theirs], member, ids.size, pairs[rows, 1]
         )

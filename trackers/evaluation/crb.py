@@ -139,7 +139,8 @@ def straight_line_velocity_bound(
     ``k`` at ``t[k]`` with covariance ``R[k] (2, 2)`` of member ``member[k]``. One member
     bounds a lone target's velocity; several, a rigid formation's, its members known.
 
-    The parameters are the members' positions at ``t = 0`` and the velocity,
+    The parameters are the members' positions at ``t = 0`` (the first measurement's time:
+    the velocity's bound is the same) and the velocity,
     ``θ = [p₁, …, p_N, v]``, measured as ``z_k = p_{m_k} + t_k v + w_k``, so that with
     ``A_k = [0 … I … 0, t_k I]`` the Fisher information of the measurements up to ``τ`` is::
 
@@ -158,6 +159,10 @@ def straight_line_velocity_bound(
     d = 2 * n_members + 2
     order = np.argsort(t, kind="stable")
     t, R, member = t[order], R[order], member[order]
+    # the positions at the first measurement's time instead of t = 0 (the same velocity
+    # bound): times of a clock's epoch would make J too ill-conditioned to invert
+    origin = float(t[0]) if t.size else 0.0
+    t, t_query = t - origin, t_query - origin
     A = np.zeros((t.size, 2, d))
     rows = np.arange(t.size)
     A[rows, 0, 2 * member] = 1.0

@@ -319,6 +319,30 @@ def _grown(X: np.ndarray, *margins: float) -> tuple[np.ndarray, ...]:
     return tuple(out)
 
 
+def truncated_mean(gamma: float) -> float:
+    """The mean number of detections of a scan that gives some, for a Poisson count of
+    mean ``γ``: ``E[n | n ≥ 1] = γ / (1 − e^{−γ})`` (1 in the limit ``γ → 0``)."""
+    return gamma / -math.expm1(-gamma) if gamma > 0.0 else 1.0
+
+
+def expected_count(m: float) -> float:
+    """The Poisson mean ``γ`` whose :func:`truncated_mean` is ``m`` (``m ≥ 1``; 0 for
+    ``m ≤ 1``): Newton's method on ``f(γ) = γ / (1 − e^{−γ}) − m`` from ``γ₀ = m`` (f is
+    convex and increasing, so the iterates fall monotonically to the root), to 1e-12."""
+    if not m > 1.0:
+        return 0.0
+    gamma = m
+    for _ in range(60):
+        q = -math.expm1(-gamma)  # 1 − e^{−γ}
+        f = gamma / q - m
+        slope = (q - gamma * math.exp(-gamma)) / (q * q)
+        step = f / slope
+        gamma -= step
+        if abs(step) <= 1e-12 * max(1.0, gamma):
+            break
+    return gamma
+
+
 def _log_poisson(n: int, gamma: float) -> float:
     """ln Poisson(n; γ) = n ln γ − γ − ln n!."""
     return n * math.log(gamma) - gamma - math.lgamma(n + 1)
@@ -747,13 +771,15 @@ class ExtendedTracker(SavesImmutableState):
                         alpha=2.0 + len(chosen),
                     )
             n = len(chosen)
-            # γ is learned from the scans that gave the track detections: learned from its
-            # misses too, it fell with each (γ ← 0.8 γ), so that a track's misses cost at
-            # most 5 γ in all, less than delete_drop_from_peak for γ < 3: a split-off pair of
-            # clutter detections coasted, confirmed, for all of max_coast_time.
+            # γ is learned from the scans that gave the track detections (their mean is the
+            # zero-truncated Poisson mean, :func:`expected_count`): learned from its misses
+            # too, it fell with each (γ ← 0.8 γ), so that a track's misses cost at most 5 γ
+            # in all, less than delete_drop_from_peak for γ < 3: a split-off pair of clutter
+            # detections coasted, confirmed, for all of max_coast_time.
             gamma = track.gamma
             if n:
-                gamma = max(MIN_GAMMA, gamma + GAMMA_GAIN * (n - gamma))
+                seen = truncated_mean(gamma)
+                gamma = max(MIN_GAMMA, expected_count(seen + GAMMA_GAIN * (n - seen)))
             chosen = np.array(chosen, dtype=np.intp)
             if n:
                 claimed[chosen] = True
