@@ -317,7 +317,8 @@ def test_held_detections_are_bounded_and_forgotten() -> None:
     _quiet(m, 1)
     n = MAX_HELD + 5
     m.hold("r", np.zeros((n, 2)), tuple(f"T{i % 7}" for i in range(n)), np.arange(n))
-    assert len(m._held) <= MAX_HELD and 0 not in m._held and n - 1 in m._held  # the oldest went
+    assert len(m._held) == 3 * MAX_HELD // 4 and 0 not in m._held and n - 1 in m._held
+    assert all(s in m._held for serials in m._holding.values() for s in serials)
     _quiet(m, HELD_SCANS + 1)
     for _ in range(64):  # the stale ones go now and then
         m.settle((), ())

@@ -2,6 +2,7 @@
 
 import itertools
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -763,3 +764,51 @@ def test_tentative_tracks_hold_their_detections_until_the_test_decides():
     confirmed_at = next(i for i, p in enumerate(props) if p.result.confirmed())
     assert props[confirmed_at].accepted == ("T1",)
     assert not any(p.rejected for p in props)
+
+
+def test_a_tentative_track_that_coasts_out_of_view_is_no_verdict_on_its_detections():
+    """Deleted for coasting while no scan looked at it, a tentative track's held detections
+    are dropped (``accepted``), not counted as false alarms (``rejected``)."""
+    from trackers.coverage import Coverage
+
+    tr = IndividualTracker(TrackerConfig())
+    props = _proposals(tr, [scan_at(k, [100.0 + 10.0 * k, 0.0], lam=3e-5) for k in range(3)])
+    assert props[2].held.holders == ("T1",)
+    elsewhere = Coverage.box(np.array([5e4, 5e4]), np.array([6e4, 6e4]))
+    away = [
+        replace(scan_at(3 + k, [5.5e4, 5.5e4], lam=3e-5), coverage=elsewhere) for k in range(15)
+    ]
+    later = _proposals(tr, away)
+    assert not any("T1" in p.rejected for p in later)
+    assert any("T1" in p.accepted for p in later)
+    assert all(t.id != "T1" for t in tr.snapshot())
+
+
+def test_no_detection_in_a_confirmed_tracks_gate_is_held_back():
+    """The clutter map never counts a detection in a confirmed track's gate, so a tentative
+    track's fate must not count it either: ``held`` leaves those out (a dense crowd of slow
+    targets, where young tracks take detections in their confirmed neighbours' gates)."""
+    from trackers.association.gating import gate
+
+    rng = np.random.default_rng(11)
+    tr = IndividualTracker(TrackerConfig())
+    x0 = rng.uniform(-150.0, 150.0, (25, 2))
+    v = rng.normal(0.0, 2.0, (25, 2))
+    held_total = 0
+    for k in range(40):
+        seen = (x0 + v * k)[rng.random(25) < 0.9]
+        z = np.vstack([seen + rng.normal(0.0, SIGMA, seen.shape), rng.uniform(-300, 300, (5, 2))])
+        scan = scan_at(k, z, lam=1e-4)
+        view = tr.predicted(float(k))
+        firm = np.flatnonzero(view.confirmed)
+        gated = set()
+        if firm.size:
+            pairs = gate(
+                view.x[firm, :2], view.P[firm, :2, :2], scan.z, scan.R, tr.config.gating.threshold
+            )
+            gated = set(pairs.detection.tolist())
+        p = tr.propose(scan)
+        tr.commit(p)
+        held_total += p.held.rows.size
+        assert not gated & set(p.held.rows.tolist()), k
+    assert held_total > 0

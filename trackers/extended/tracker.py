@@ -108,6 +108,9 @@ POINT_GATE = 9.21
 GAMMA_GAIN = 0.2
 #: Smallest expected detection count: keeps ln Poisson finite and a miss's cost positive.
 MIN_GAMMA = 0.3
+#: Smallest expected detection count learned from a track's scans: a track's misses cost it
+#: delete_drop_from_peak in no more than that many (15 with the defaults).
+MIN_LEARNED_GAMMA = 1.0
 #: Velocity std (m/s) per axis of a new track's centroid beyond what its birth measured.
 BIRTH_VELOCITY_STD = 5.0
 #: Velocity std (m/s) per axis of a track split off another: measured from the centroid of a
@@ -331,6 +334,8 @@ def expected_count(m: float) -> float:
     convex and increasing, so the iterates fall monotonically to the root), to 1e-12."""
     if not m > 1.0:
         return 0.0
+    if math.isinf(m):
+        return m
     gamma = m
     for _ in range(60):
         q = -math.expm1(-gamma)  # 1 − e^{−γ}
@@ -772,14 +777,16 @@ class ExtendedTracker(SavesImmutableState):
                     )
             n = len(chosen)
             # γ is learned from the scans that gave the track detections (their mean is the
-            # zero-truncated Poisson mean, :func:`expected_count`): learned from its misses
-            # too, it fell with each (γ ← 0.8 γ), so that a track's misses cost at most 5 γ
-            # in all, less than delete_drop_from_peak for γ < 3: a split-off pair of clutter
-            # detections coasted, confirmed, for all of max_coast_time.
+            # zero-truncated Poisson mean, :func:`expected_count`), and a learned γ is at
+            # least MIN_LEARNED_GAMMA: learned from its misses too, it fell with each
+            # (γ ← 0.8 γ), so that a track's misses cost at most 5 γ in all, less than
+            # delete_drop_from_peak for γ < 3 (a split-off pair of clutter detections
+            # coasted, confirmed, for all of max_coast_time); and an object giving one
+            # detection every scan (no Poisson count) would read γ → 0.
             gamma = track.gamma
             if n:
                 seen = truncated_mean(gamma)
-                gamma = max(MIN_GAMMA, expected_count(seen + GAMMA_GAIN * (n - seen)))
+                gamma = max(MIN_LEARNED_GAMMA, expected_count(seen + GAMMA_GAIN * (n - seen)))
             chosen = np.array(chosen, dtype=np.intp)
             if n:
                 claimed[chosen] = True

@@ -617,7 +617,6 @@ def test_the_expected_count_is_the_poisson_mean_behind_the_scans_with_detections
 
 
 def test_a_state_file_without_run_sensors_reads_as_before():
-    from trackers.extended.state import ExtendedCheckpoint
     from trackers.state import StateSection
 
     p = TrackingPipeline.all_kinds()
@@ -632,5 +631,36 @@ def test_a_state_file_without_run_sensors_reads_as_before():
     )
     fresh = next(q for q in TrackingPipeline.all_kinds().peers if q.kind == "extended")
     fresh.restore_state(fresh.check_state(old))
-    assert all(c.sensor == "" for c in fresh._state.candidates)
-    assert isinstance(peer.checkpoint(), ExtendedCheckpoint)
+    assert fresh._state.candidates and all(c.sensor == "" for c in fresh._state.candidates)
+    # and a file of this version keeps them
+    again = next(q for q in TrackingPipeline.all_kinds().peers if q.kind == "extended")
+    again.restore_state(again.check_state(section))
+    assert {c.sensor for c in again._state.candidates} == {c.sensor for c in peer._state.candidates}
+    assert "" not in {c.sensor for c in again._state.candidates}
+
+
+def test_one_detection_a_scan_keeps_an_expected_count_of_one():
+    """An object giving one detection every scan reads a zero-truncated mean of 1, a Poisson
+    mean of 0: the learned γ is held at MIN_LEARNED_GAMMA (1), so its misses still cost 1
+    each and the track goes after delete_drop_from_peak (15) of them, not after 50 at the
+    floor of 0.3 (or at max_coast_time)."""
+    from trackers.extended.tracker import MIN_LEARNED_GAMMA
+
+    cfg = TrackerConfig().merged({"extended": {"max_coast_time": 1000.0}})
+    p = TrackingPipeline.all_kinds(cfg)
+    peer = next(q for q in p.peers if q.kind == "extended")
+    rng = np.random.default_rng(3)
+    p.process(_cluster_scan(0, rng, np.array([0.0, 0.0]), n=0, clutter=10))
+    track = peer.start(0.0, [0.0, 0.0], [0.0, 0.0], np.eye(2) * 50.0**2, expected_detections=3.0)
+    far = np.array([[-5e3, -5e3], [5e3, 5e3]])  # the radar looks at the track
+    for k in range(1, 30):
+        z = np.vstack([rng.normal(0.0, 10.0, (1, 2)), far])
+        p.process(Scan("radar", 5.0 * k, z, np.tile(R, (3, 1, 1))))
+    (live,) = [t for t in peer.tracks if t.id == track.id]
+    assert live.gamma == pytest.approx(MIN_LEARNED_GAMMA)
+    misses = 0
+    while any(t.id == track.id for t in peer.tracks):
+        misses += 1
+        p.process(Scan("radar", 5.0 * (29 + misses), far, np.tile(R, (2, 1, 1))))
+        assert misses < 40
+    assert 15 <= misses <= 17
