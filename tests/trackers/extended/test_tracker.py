@@ -572,16 +572,25 @@ def test_another_sensors_scan_that_misses_a_birth_run_does_not_break_it():
     assert [t.kind for t in result.confirmed()] == ["extended"]  # the one track of the ship
 
 
+def _started_by_hand(expected: float, seed: int):
+    """A pipeline (extended tracks coast up to 1000 s) with one extended track started by
+    hand at the origin, standing still, expecting ``expected`` detections a scan."""
+    cfg = TrackerConfig().merged({"extended": {"max_coast_time": 1000.0}})
+    p = TrackingPipeline.all_kinds(cfg)
+    peer = next(q for q in p.peers if q.kind == "extended")
+    rng = np.random.default_rng(seed)
+    p.process(_cluster_scan(0, rng, np.array([0.0, 0.0]), n=0, clutter=10))
+    track = peer.start(
+        0.0, [0.0, 0.0], [0.0, 0.0], np.eye(2) * 50.0**2, expected_detections=expected
+    )
+    return p, peer, track, rng
+
+
 def test_misses_do_not_lower_an_extended_tracks_expected_count():
     """ΔL(∅) = −γ: learned from the misses too, γ fell by a fifth with each, so the misses of
     a track expecting fewer than 3 detections cost less than delete_drop_from_peak in all, and
     a confirmed track with none coasted on until max_coast_time."""
-    cfg = TrackerConfig().merged({"extended": {"max_coast_time": 1000.0}})
-    p = TrackingPipeline.all_kinds(cfg)
-    peer = next(q for q in p.peers if q.kind == "extended")
-    rng = np.random.default_rng(2)
-    p.process(_cluster_scan(0, rng, np.array([0.0, 0.0]), n=0, clutter=10))
-    track = peer.start(0.0, [0.0, 0.0], [0.0, 0.0], np.eye(2) * 50.0**2, expected_detections=2.0)
+    p, peer, track, _ = _started_by_hand(2.0, seed=2)
     gone = None
     for k in range(1, 40):
         far = np.array([[-5e3, -5e3], [5e3, 5e3]])  # the radar looks at the track: a miss
@@ -646,12 +655,7 @@ def test_one_detection_a_scan_keeps_an_expected_count_of_one():
     floor of 0.3 (or at max_coast_time)."""
     from trackers.extended.tracker import MIN_LEARNED_GAMMA
 
-    cfg = TrackerConfig().merged({"extended": {"max_coast_time": 1000.0}})
-    p = TrackingPipeline.all_kinds(cfg)
-    peer = next(q for q in p.peers if q.kind == "extended")
-    rng = np.random.default_rng(3)
-    p.process(_cluster_scan(0, rng, np.array([0.0, 0.0]), n=0, clutter=10))
-    track = peer.start(0.0, [0.0, 0.0], [0.0, 0.0], np.eye(2) * 50.0**2, expected_detections=3.0)
+    p, peer, track, rng = _started_by_hand(3.0, seed=3)
     far = np.array([[-5e3, -5e3], [5e3, 5e3]])  # the radar looks at the track
     for k in range(1, 30):
         z = np.vstack([rng.normal(0.0, 10.0, (1, 2)), far])
