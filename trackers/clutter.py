@@ -318,9 +318,10 @@ class ClutterMap:
 
     def settle(self, accepted: Sequence[str], rejected: Sequence[str]) -> None:
         """The fates of tracks that held detections back: ``accepted`` (confirmed, continuing
-        a confirmed track, or a rival reading of a start that another took) drop theirs,
-        ``rejected`` (deleted by the sequential test before confirmation) release theirs,
-        which count as false alarms once no track holds them (module docstring)."""
+        a confirmed track, a rival reading of a start that another took, or deleted for
+        coasting while out of view: no verdict) drop theirs, ``rejected`` (deleted by the
+        sequential test before confirmation, a losing rival too) release theirs, which count
+        as false alarms once no track holds them (module docstring)."""
         held, holding = self._held, self._holding
         for holder in accepted:
             for serial in holding.pop(holder, ()):
