@@ -312,9 +312,8 @@ class ClutterMap:
             entry[5] += 1
             holding.setdefault(holder, []).append(serial)
         if len(held) > MAX_HELD:  # the oldest quarter goes at once (amortized O(1))
-            self._held = held = dict(list(held.items())[len(held) - 3 * MAX_HELD // 4 :])
-            holding = {h: [s for s in serials if s in held] for h, serials in holding.items()}
-            self._holding = {h: serials for h, serials in holding.items() if serials}
+            self._held = dict(list(held.items())[len(held) - 3 * MAX_HELD // 4 :])
+            self._prune_holding()
 
     def settle(self, accepted: Sequence[str], rejected: Sequence[str]) -> None:
         """The fates of tracks that held detections back: ``accepted`` (confirmed, continuing
@@ -372,6 +371,11 @@ class ClutterMap:
         ]
         for serial in stale:
             del held[serial]
+        self._prune_holding()
+
+    def _prune_holding(self) -> None:
+        """Each holder's serials less those no longer held; holders left with none go."""
+        held = self._held
         holding = {h: [s for s in serials if s in held] for h, serials in self._holding.items()}
         self._holding = {h: serials for h, serials in holding.items() if serials}
 

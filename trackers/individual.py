@@ -530,10 +530,8 @@ class IndividualTracker:
         # The fates of the tracks that held detections back from the clutter map: no target
         # (the test deleted a tentative track), or a target's or another reading's (confirmed
         # now, merged into a confirmed track, a rival or sibling that lost).
-        fates = (
-            tuple(tracks.ids[(newly & ~delete) | (delete & ~tested)].tolist()),
-            tuple(tracks.ids[tested & ~tracks.confirmed].tolist()),
-        )
+        accepted = tuple(tracks.ids[(newly & ~delete) | (delete & ~tested)].tolist())
+        rejected = tuple(tracks.ids[tested & ~tracks.confirmed].tolist())
         tracks = _frozen(
             _kept(tracks, ~delete, confirmed=newly | tracks.confirmed, born=born, n_old=n_old)
         )
@@ -565,8 +563,8 @@ class IndividualTracker:
             state=(self._version, state),
             clutter=(claims < np.inf) & ~established,
             held=held,
-            accepted=fates[0],
-            rejected=fates[1],
+            accepted=accepted,
+            rejected=rejected,
         )
 
     def _update_existing(
