@@ -30,7 +30,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from trackers.association.gating import gate, max_eigenvalue_2x2
+from trackers.association.gating import GatedPairs, gate, max_eigenvalue_2x2
 from trackers.association.gnn import gnn_assign
 from trackers.association.manoeuvre import ManoeuvreMatch, manoeuvre_search, reaches_beyond
 from trackers.association.spatial import pairs_within
@@ -198,6 +198,17 @@ class _Prediction:
             Pc=self.Pc[keep],
         )
 
+    def gated(self, scan: Scan, gamma: float) -> GatedPairs:
+        """Every track's pairs with ``scan``'s detections in its χ² gate ``γ``
+        (:func:`~trackers.association.gating.gate` on ``xc``, ``Pc``), found once for a scan
+        and a ``γ``: the peers' view and the tracker's own update share them."""
+        cached = self.__dict__.get("_gated")
+        if cached is not None and cached[0] is scan and cached[1] == gamma:
+            return cached[2]
+        pairs = gate(self.xc[:, :2], self.Pc[:, :2, :2], scan.z, scan.R, gamma)
+        object.__setattr__(self, "_gated", (scan, gamma, pairs))
+        return pairs
+
 
 @dataclass(frozen=True, eq=False)
 class _State:
@@ -344,6 +355,10 @@ class IndividualTracker:
             confirmed=tr.confirmed,
             created=tr.created,
             updated=tr.updated,
+            gated=lambda scan: (
+                pred.gated(scan, pred.config.gating.threshold),
+                pred.config.gating.threshold,
+            ),
         )
 
     def step(self, scan: Scan, directives: PointDirectives | None = None) -> StepResult:
@@ -597,8 +612,8 @@ class IndividualTracker:
         detections that tentative tracks of that many detections hold back from the clutter
         map (:class:`~trackers.peers.HeldDetections`)."""
         config, tracks = pred.config, pred.tracks
-        x_pred, P_pred, c_bar, xc, Pc = pred.x_pred, pred.P_pred, pred.c_bar, pred.xc, pred.Pc
-        pairs = gate(xc[:, :2], Pc[:, :2, :2], scan.z, scan.R, config.gating.threshold)
+        x_pred, P_pred, c_bar = pred.x_pred, pred.P_pred, pred.c_bar
+        pairs = pred.gated(scan, config.gating.threshold)
         ti, dj = pairs.track, pairs.detection
         # The mode-matched update of every gated pair gives its likelihood g_ij for the
         # association gain, and the posterior of the pairs the assignment keeps.

@@ -52,6 +52,7 @@ from trackers.state import StateSection
 from trackers.types import Scan, StepResult, TrackSnapshot
 
 if TYPE_CHECKING:
+    from trackers.association.gating import GatedPairs
     from trackers.config import TrackerConfig
 
 __all__ = [
@@ -137,7 +138,11 @@ class PointTrackView:
     """The point tracker's live tracks predicted to ``time``, read-only: row ``i`` is track
     ``ids[i]``, ``x (N, 5)`` its predicted state ``[x, y, vx, vy, ω]`` and ``P (N, 5, 5)`` its
     covariance (moment-matched over the IMM modes); ``created`` and ``updated`` the times of
-    its first and latest detection."""
+    its first and latest detection. ``gated``, when the point tracker gives it: for a scan,
+    the pairs (rows of this view, rows of the scan) in the point tracker's own χ² gate on
+    ``x``, ``P`` and the detections' covariances, and that gate's ``γ``; found once a scan
+    and shared with the point tracker's update when the peers claim nothing (a view with
+    tracks left out has none)."""
 
     time: float
     ids: tuple[str, ...]
@@ -148,6 +153,9 @@ class PointTrackView:
     confirmed: np.ndarray
     created: np.ndarray
     updated: np.ndarray
+    gated: Callable[[Scan], tuple[GatedPairs, float]] | None = field(
+        default=None, repr=False, compare=False
+    )
 
     def __post_init__(self) -> None:
         for name in ("x", "P", "score", "created", "updated"):

@@ -375,7 +375,8 @@ class TrackingPipeline:
                 peer_view = _view_without(peer_view, set(prop.take))
         kinds = tuple(p.kind for p in self.peers)
         directives = self._with_hand_over(combine_directives(kinds, tuple(proposals), view))
-        point = self.point.propose(scan.subset(~claimed), directives)
+        # (the scan itself when the peers claimed nothing: the view's gate pairs are its own)
+        point = self.point.propose(scan.subset(~claimed) if claimed.any() else scan, directives)
         # Commit: every tracker has proposed without error.
         for peer, prop in zip(self.peers, proposals, strict=True):
             peer.commit(prop)

@@ -812,3 +812,29 @@ def test_no_detection_in_a_confirmed_tracks_gate_is_held_back():
         held_total += p.held.rows.size
         assert not gated & set(p.held.rows.tolist()), k
     assert held_total > 0
+
+
+def test_the_views_gate_pairs_are_found_once_and_are_the_updates_own(monkeypatch):
+    """The peers' view gives the pairs of the tracker's χ² gate for a scan; the tracker's own
+    update of that same scan takes them instead of gating again (a copy of the scan is
+    gated anew)."""
+    import trackers.individual as individual
+    from trackers.association.gating import gate
+
+    tr = IndividualTracker(config(pd=0.9, clutter_density=1e-6))
+    for k in range(4):
+        tr.step(scan_at(k, [[10.0 * k, 0.0], [500.0, 10.0 * k]]))
+    scan = scan_at(4, [[40.0, 1.0], [501.0, 41.0], [60.0, 0.0]])
+    view = tr.predicted(4.0)
+    pairs, gamma = view.gated(scan)
+    assert gamma == tr.config.gating.threshold
+    want = gate(view.x[:, :2], view.P[:, :2, :2], scan.z, scan.R, gamma)
+    assert pairs.track.tolist() == want.track.tolist() and pairs.track.size >= 2
+    assert pairs.detection.tolist() == want.detection.tolist()
+    assert np.allclose(pairs.d2, want.d2)
+    calls = []
+    monkeypatch.setattr(individual, "gate", lambda *a: calls.append(a) or gate(*a))
+    tr.propose(scan)
+    assert calls == []
+    tr.propose(scan.subset(np.ones(scan.size, dtype=bool)))
+    assert len(calls) == 1

@@ -432,12 +432,26 @@ class _PointGates:
         self.size = scan.size
         self._z, self._R = scan.z, scan.R
         self._x, self._P = x, P
+        self._kept = kept
+        self._view, self._scan = view, scan
 
     @cached_property
     def _pairs(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         empty = np.zeros(0, dtype=np.intp)
         if not (self.rows.size and self.size):
             return empty, empty, np.zeros(0)
+        if self._view.gated is not None:
+            # The point tracker's own gate pairs of this scan, when its gate is as wide:
+            # those of the kept tracks within this one (the same d², in the same order).
+            shared, gamma = self._view.gated(self._scan)
+            if gamma >= POINT_GATE:
+                inside = np.take(self._kept, shared.track) & (shared.d2 <= POINT_GATE)
+                position = np.cumsum(self._kept) - 1  # view row -> index into rows
+                return (
+                    shared.detection[inside],
+                    np.take(position, shared.track[inside]),
+                    shared.d2[inside],
+                )
         # pre-gate: within each track's gate radius for the widest detection covariance
         radius = np.sqrt(
             POINT_GATE * (max_eigenvalue_2x2(self.Pp) + float(np.max(max_eigenvalue_2x2(self._R))))

@@ -668,3 +668,35 @@ def test_one_detection_a_scan_keeps_an_expected_count_of_one():
         p.process(Scan("radar", 5.0 * (29 + misses), far, np.tile(R, (2, 1, 1))))
         assert misses < 40
     assert 15 <= misses <= 17
+
+
+@pytest.mark.parametrize("gate_probability", [0.9999, 0.95])
+def test_point_gates_from_the_point_trackers_shared_pairs_are_its_own(gate_probability):
+    """A scene of confirmed and tentative tracks amid detections: the gate pairs that
+    :class:`_PointGates` takes from the point tracker's view (its own χ² gate, when as wide
+    as the 99 % point gate; otherwise it finds its own) are those it finds itself, in the
+    same order, and explain the same detections."""
+    from trackers.extended.tracker import _PointGates
+    from trackers.individual import IndividualTracker
+
+    rng = np.random.default_rng(3)
+    cfg = TrackerConfig().merged({"gating": {"gate_probability": gate_probability}})
+    tracker = IndividualTracker(cfg)
+    truth = rng.uniform(0, 3000, (30, 2))
+    for k in range(6):  # targets at 5 m/s east, clutter
+        seen = truth + np.array([5.0 * k, 0.0]) + rng.normal(0, 10, truth.shape)
+        z = np.vstack([seen, rng.uniform(0, 3000, (20, 2))])
+        tracker.step(Scan("s", float(k), z, np.tile(R, (len(z), 1, 1))))
+    seen = truth + np.array([30.0, 0.0]) + rng.normal(0, 10, truth.shape)
+    z = np.vstack([seen, rng.uniform(0, 3000, (40, 2))])
+    scan = Scan("s", 6.0, z, np.tile(R, (len(z), 1, 1)))
+    view = tracker.predicted(6.0)
+    assert view.gated is not None and view.confirmed.sum() >= 10 and (~view.confirmed).sum() >= 1
+    own = replace(view, gated=None)
+    for min_hits in (None, 3):
+        shared, alone = _PointGates(view, scan, min_hits), _PointGates(own, scan, min_hits)
+        for a, b in ((shared.det, alone.det), (shared.trk, alone.trk)):
+            assert a.tolist() == b.tolist()
+        assert np.allclose(shared.m, alone.m, rtol=1e-12, atol=1e-12)
+        assert shared.explained.tolist() == alone.explained.tolist()
+        assert len(shared.det) >= 10
