@@ -51,6 +51,7 @@ velocity and extent prior; such a track is confirmed at once.
 from __future__ import annotations
 
 import functools
+import itertools
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, replace
@@ -65,8 +66,10 @@ from trackers.association.spatial import pairs_within
 from trackers.config import ExtendedConfig, TrackerConfig, TrackManagementConfig
 from trackers.coverage import Coverage
 from trackers.extended.partition import (
+    UNION_FIND_EDGES,
     close_pairs,
     component_labels,
+    edge_groups,
     pair_subsets,
     point_subsets,
 )
@@ -410,30 +413,80 @@ def _one_to_one(n_trk: np.ndarray, n_det: np.ndarray) -> np.ndarray:
     return (n_trk >= n_det) & (n_det <= 2)
 
 
+def _sets_of_few(
+    det: np.ndarray,
+    trk: np.ndarray,
+    at: np.ndarray,
+    n_d: int,
+    n_trk: np.ndarray,
+    n_det: np.ndarray,
+    track_ok: np.ndarray,
+) -> None:
+    """:attr:`_PointGates._sets` for the gate pairs ``at`` that share a detection or a track
+    with another pair, grouped by :func:`~trackers.extended.partition.edge_groups` (nodes:
+    the detections, then ``n_d`` + the tracks): each pair's set sizes into ``n_trk`` and
+    ``n_det``, each of their tracks' one-to-one verdict into ``track_ok`` (in place)."""
+    d_list = np.take(det, at).tolist()
+    k_list = [n_d + k for k in np.take(trk, at).tolist()]
+    size_of: dict[int, tuple[int, int]] = {}
+    for group in edge_groups(d_list, k_list):
+        nd = sum(1 for node in group if node < n_d)
+        sizes = (len(group) - nd, nd)
+        for node in group:
+            size_of[node] = sizes
+    n_trk[at] = [size_of[d][0] for d in d_list]
+    n_det[at] = [size_of[d][1] for d in d_list]
+    tracks = [node for node in size_of if node >= n_d]
+    track_ok[[node - n_d for node in tracks]] = [
+        size_of[node][0] >= size_of[node][1] and size_of[node][1] <= 2 for node in tracks
+    ]
+
+
 class _PointGates:
-    """The confirmed individual tracks of a scan (``rows`` of the view; ``xy``, ``v`` and
-    their covariances ``Pp``, ``Pv``; ``created``) with the 99 % gates in which they keep a
+    """The confirmed individual tracks of a scan (``rows`` of the view; ``xy``, ``v``, the
+    position covariances ``Pp``, ``created``) with the 99 % gates in which they keep a
     detection. ``det``, ``trk``, ``m``: the (detection, track) pairs of the whole scan where
     the detection lies in the track's gate, as index arrays (rows of the scan, indices into
-    the confirmed tracks) and squared Mahalanobis distances, found on first use (behind the
-    spatial pre-gate of :func:`trackers.association.spatial.pairs_within`);
-    :meth:`theirs` computes only the pairs it needs."""
+    the confirmed tracks) and squared Mahalanobis distances, found on first use: from the
+    point tracker's own gate pairs of the scan (:attr:`PointTrackView.gated
+    <trackers.peers.PointTrackView>`) when its gate is as wide, else behind the spatial
+    pre-gate of :func:`trackers.association.spatial.pairs_within`; :meth:`theirs` computes
+    only the pairs it needs."""
 
     def __init__(self, view: PointTrackView, scan: Scan, min_hits: int | None = None) -> None:
         # min_hits: tentative tracks of that many detections or more are taken too
         kept = view.confirmed if min_hits is None else view.confirmed | (view.hits >= min_hits)
         self.rows = np.flatnonzero(kept)
-        x = np.take(view.x, self.rows, axis=0)
-        P = np.take(view.P, self.rows, axis=0)
-        self.xy, self.v = x[:, :2], x[:, 2:4]
-        self.Pp, self.Pv = P[:, :2, :2], P[:, 2:4, 2:4]
-        self.created = np.take(view.created, self.rows)
         self._ids = view.ids
         self.size = scan.size
         self._z, self._R = scan.z, scan.R
-        self._x, self._P = x, P
         self._kept = kept
         self._view, self._scan = view, scan
+
+    # The kept tracks' states, taken on first use (the births' test needs only the pairs).
+    @cached_property
+    def _x(self) -> np.ndarray:
+        return np.take(self._view.x, self.rows, axis=0)
+
+    @cached_property
+    def _P(self) -> np.ndarray:
+        return np.take(self._view.P, self.rows, axis=0)
+
+    @property
+    def xy(self) -> np.ndarray:
+        return self._x[:, :2]
+
+    @property
+    def v(self) -> np.ndarray:
+        return self._x[:, 2:4]
+
+    @property
+    def Pp(self) -> np.ndarray:
+        return self._P[:, :2, :2]
+
+    @cached_property
+    def created(self) -> np.ndarray:
+        return np.take(self._view.created, self.rows)
 
     @cached_property
     def _pairs(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -494,7 +547,11 @@ class _PointGates:
             shared = (np.bincount(det, minlength=self.size)[det] > 1) | (
                 np.bincount(trk, minlength=self.rows.size)[trk] > 1
             )
-            if shared.any():
+            at = np.flatnonzero(shared)
+            if 0 < at.size <= UNION_FIND_EDGES:
+                # A few pairs (the usual case): their sets by one plain loop, no node arrays.
+                _sets_of_few(det, trk, at, self.size, n_trk, n_det, track_ok)
+            elif at.size:
                 n_d = self.size  # nodes: the detections, then the tracks
                 d, k = det[shared], n_d + trk[shared]
                 labels = component_labels(n_d + self.rows.size, d, k)
@@ -923,13 +980,13 @@ class ExtendedTracker(SavesImmutableState):
             # track lost for a scan or two does not start one either).
             kept = _less_explained(subsets, point_gates())
             subsets = [rows for rows in kept if rows.size >= max(2, cfg.min_detections)]
-        clusters = [s.tolist() for s in subsets]
+        clusters = subsets
         centroids: list[tuple[float, float]] = []
         if clusters:  # every cluster's mean at once: sums over the clusters' runs of rows
-            sizes = np.array([len(rows) for rows in clusters])
-            starts = np.concatenate(([0], np.cumsum(sizes[:-1])))
-            sums = np.add.reduceat(scan.z.take(np.concatenate(subsets), axis=0), starts, axis=0)
-            centroids = [(x, y) for x, y in (sums / sizes[:, None]).tolist()]
+            sizes = [rows.size for rows in clusters]
+            starts = list(itertools.accumulate(sizes[:-1], initial=0))
+            sums = np.add.reduceat(scan.z.take(np.concatenate(clusters), axis=0), starts, axis=0)
+            centroids = [(x / n, y / n) for (x, y), n in zip(sums.tolist(), sizes, strict=True)]
         # Each cluster's run: the candidate it continues (nearest to its prediction).
         match: list[_Candidate | None] = [None] * len(clusters)
         candidates: list[_Candidate] = []

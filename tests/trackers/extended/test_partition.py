@@ -3,7 +3,13 @@
 import numpy as np
 import pytest
 
-from trackers.extended.partition import component_labels, nested_unions, resolution_subsets
+from trackers.extended.partition import (
+    BRUTE_FORCE_POINTS,
+    close_pairs,
+    component_labels,
+    nested_unions,
+    resolution_subsets,
+)
 
 
 def test_chains_closer_than_the_resolution_distance_are_one_subset():
@@ -80,3 +86,27 @@ def test_subsets_match_connected_components_and_min_size_keeps_the_large_ones(n)
     assert [tuple(s.tolist()) for s in resolution_subsets(Z, 150.0)] == expected
     big = [tuple(s.tolist()) for s in resolution_subsets(Z, 150.0, min_size=3)]
     assert big == [s for s in expected if len(s) >= 3] and big
+
+
+@pytest.mark.parametrize("n", [0, 1, 2, 17, BRUTE_FORCE_POINTS])
+def test_close_pairs_of_a_few_points_are_every_pair_within_the_distance_in_order(n):
+    """The pairs of a few points (every distance) are those of a plain double loop, ``i < j``
+    in row order; points exactly at the distance count; many points (a k-d tree) give the
+    same set."""
+    rng = np.random.default_rng(n)
+    Z = rng.uniform(0, 1000, (n, 2))
+    if n >= 2:
+        Z[1] = Z[0] + [120.0, 160.0]  # exactly 200 m apart
+    i, j = close_pairs(Z, 200.0)
+    want = [
+        (a, b)
+        for a in range(n)
+        for b in range(a + 1, n)
+        if (Z[a, 0] - Z[b, 0]) ** 2 + (Z[a, 1] - Z[b, 1]) ** 2 <= 200.0**2
+    ]
+    assert list(zip(i.tolist(), j.tolist(), strict=True)) == want
+    assert n < 2 or (0, 1) in want
+    many = np.vstack([Z, rng.uniform(5000, 9000, (BRUTE_FORCE_POINTS, 2))])
+    ti, tj = close_pairs(many, 200.0)
+    inside = ti < n
+    assert sorted(zip(ti[inside].tolist(), tj[inside].tolist(), strict=True)) == want

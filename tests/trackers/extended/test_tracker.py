@@ -700,3 +700,26 @@ def test_point_gates_from_the_point_trackers_shared_pairs_are_its_own(gate_proba
         assert np.allclose(shared.m, alone.m, rtol=1e-12, atol=1e-12)
         assert shared.explained.tolist() == alone.explained.tolist()
         assert len(shared.det) >= 10
+
+
+def test_gate_sets_of_a_few_shared_pairs_are_those_of_the_labelled_nodes(monkeypatch):
+    """The sets of gate pairs that share a detection or a track: the plain loop for a few of
+    them gives each pair's set sizes and each track's verdict as the node labels do."""
+    import trackers.extended.tracker as tracker
+    from trackers.extended.tracker import _PointGates
+
+    rng = np.random.default_rng(11)
+    shared = 0
+    for trial in range(20):
+        xy = rng.uniform(0, 600, (25, 2))
+        view = _view_of(xy, np.zeros((25, 2)), rng.random(25) < 0.8)
+        z = np.vstack([xy[:15] + rng.normal(0, 8, (15, 2)), rng.uniform(0, 600, (10, 2))])
+        scan = Scan("s", 0.0, z, np.tile(R, (len(z), 1, 1)))
+        few = _PointGates(view, scan)._sets
+        monkeypatch.setattr(tracker, "UNION_FIND_EDGES", 0)
+        labelled = _PointGates(view, scan)._sets
+        monkeypatch.undo()
+        for a, b in zip(few, labelled, strict=True):
+            assert a.tolist() == b.tolist(), trial
+        shared += bool((few[0] > 1).any() or (few[1] > 1).any())
+    assert shared >= 10  # scenes with pairs sharing a node
