@@ -14,13 +14,22 @@ gives it the box that held its sensor's detections over its last :data:`LEARN_SC
 standard deviations of the largest detection noise: a sensor is taken to look where it has
 been seeing things, and one that has seen nothing in that while to look nowhere. A lone
 sensor's scans cover everything, as before.
+
+How much of a target's possible positions a scan looked at decides how much its silence
+says: :func:`visible_fraction` is the share of a Gaussian (a track's predicted position) and
+:func:`disc_fraction` the share of a disc (the reach of a target of unknown velocity) inside
+the coverage, estimated on a fixed spread of sample points where the shape straddles its
+edge (exactly 0 or 1 elsewhere). A scan misses a target with probability ``1 − P_D · f``: a
+camera watching a 200 m square ten times a second says nothing of a car 100 m outside it,
+whose radar track it would otherwise have missed ten times a second.
 """
 
 from __future__ import annotations
 
 import math
-from collections import OrderedDict, deque
+from collections import OrderedDict
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -30,8 +39,10 @@ __all__ = [
     "MAX_VERTICES",
     "Coverage",
     "CoverageLearner",
+    "disc_fraction",
     "point_in_polygon",
     "polygon_distance",
+    "visible_fraction",
 ]
 
 #: The most vertices a coverage polygon may have.
@@ -110,6 +121,12 @@ class Coverage:
             if not np.isfinite(poly).all():
                 raise ValueError("coverage: polygon vertices must be finite")
             object.__setattr__(self, "polygon", poly)
+            (x0, y0), (x1, y1) = poly[0], poly[poly.shape[0] // 2]
+            box = [[x0, y0], [x1, y0], [x1, y1], [x0, y1]]
+            if x0 < x1 and y0 < y1 and poly.shape[0] == 4 and np.array_equal(poly, box):
+                # A box as :meth:`box` makes it (learned coverages among them): tested by
+                # comparisons, with the even-odd rule's answers (x0 <= x < x1, y0 <= y < y1).
+                object.__setattr__(self, "_bounds", (float(x0), float(y0), float(x1), float(y1)))
         if self.max_range is not None:
             if self.centre is None:
                 raise ValueError("coverage: max_range needs the sensor's position")
@@ -128,18 +145,35 @@ class Coverage:
         (x0, y0), (x1, y1) = np.asarray(lo, dtype=float), np.asarray(hi, dtype=float)
         return Coverage(polygon=np.array([[x0, y0], [x1, y0], [x1, y1], [x0, y1]]), learned=learned)
 
+    def _in_range(
+        self, points: np.ndarray, margin: float | np.ndarray, sign: float
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The points ``(N, 2)``, their margins ``(N,)`` and whether each is within
+        ``max_range + sign · margin`` of the sensor (all when there is no range; none when
+        the coverage is nowhere)."""
+        p = np.asarray(points, dtype=float).reshape(-1, 2)
+        m = np.broadcast_to(np.asarray(margin, dtype=float), (p.shape[0],))
+        inside = np.full(p.shape[0], not self.nowhere)
+        if self.max_range is not None and self.centre is not None and not self.nowhere:
+            r = np.hypot(p[:, 0] - self.centre[0], p[:, 1] - self.centre[1])
+            inside &= r <= self.max_range + sign * m
+        return p, m, inside
+
     def contains(self, points: np.ndarray, margin: float | np.ndarray = 0.0) -> np.ndarray:
         """Whether each of ``points (N, 2)`` is in view: inside every shape given or within
         ``margin`` (m, a number or one per point) of its edge."""
-        p = np.asarray(points, dtype=float).reshape(-1, 2)
-        if self.nowhere:
-            return np.zeros(p.shape[0], dtype=bool)
-        m = np.broadcast_to(np.asarray(margin, dtype=float), (p.shape[0],))
-        inside = np.ones(p.shape[0], dtype=bool)
-        if self.max_range is not None and self.centre is not None:
-            r = np.hypot(p[:, 0] - self.centre[0], p[:, 1] - self.centre[1])
-            inside &= r <= self.max_range + m
-        if self.polygon is not None and inside.any():
+        p, m, inside = self._in_range(points, margin, 1.0)
+        bounds = self.__dict__.get("_bounds")
+        if bounds is not None and inside.any():
+            x, y = p[:, 0], p[:, 1]
+            x0, y0, x1, y1 = bounds
+            within = (x >= x0) & (x < x1) & (y >= y0) & (y < y1)
+            if (m > 0).any():  # within margin of the box: its distance to the box
+                dx = np.maximum(np.maximum(x0 - x, x - x1), 0.0)
+                dy = np.maximum(np.maximum(y0 - y, y - y1), 0.0)
+                within |= np.sqrt(dx * dx + dy * dy) <= m
+            inside &= within
+        elif self.polygon is not None and inside.any():
             rows = np.flatnonzero(inside)
             poly = self.polygon
             lo, hi = poly.min(axis=0), poly.max(axis=0)
@@ -160,15 +194,114 @@ class Coverage:
             inside[rows] = ok
         return inside
 
+    def holds(self, points: np.ndarray, margin: np.ndarray) -> np.ndarray:
+        """Whether each of ``points (N, 2)`` is in view with at least ``margin (N,)`` (m) to
+        spare: inside every shape given and at least that far from its edge."""
+        p, m, inside = self._in_range(points, margin, -1.0)
+        bounds = self.__dict__.get("_bounds")
+        if bounds is not None and inside.any():
+            x, y = p[:, 0], p[:, 1]
+            x0, y0, x1, y1 = bounds
+            room = np.minimum(np.minimum(x - x0, x1 - x), np.minimum(y - y0, y1 - y))
+            inside &= (x >= x0) & (x < x1) & (y >= y0) & (y < y1) & (room >= m)
+        elif self.polygon is not None and inside.any():
+            rows = np.flatnonzero(inside)
+            poly = self.polygon
+            lo, hi = poly.min(axis=0), poly.max(axis=0)
+            q, mq = p[rows], m[rows]
+            ok = ((q >= lo + mq[:, None]) & (q <= hi - mq[:, None])).all(axis=1)
+            sub = np.flatnonzero(ok)
+            if sub.size:
+                deep = point_in_polygon(q[sub], poly)
+                deep[deep] = polygon_distance(q[sub[deep]], poly) >= mq[sub[deep]]
+                ok[sub] = deep
+            inside[rows] = ok
+        return inside
+
+
+#: The sample points of :func:`visible_fraction` and :func:`disc_fraction`: a sunflower
+#: spiral (golden-angle steps) of equal-probability rings, of the standard normal
+#: distribution and of the unit disc.
+SAMPLES = 64
+_ANGLE = np.arange(SAMPLES) * math.pi * (3.0 - math.sqrt(5.0))
+_U = (np.arange(SAMPLES) + 0.5) / SAMPLES
+_NORMAL = np.sqrt(-2.0 * np.log1p(-_U))[:, None] * np.column_stack([np.cos(_ANGLE), np.sin(_ANGLE)])
+_DISC = np.sqrt(_U)[:, None] * np.column_stack([np.cos(_ANGLE), np.sin(_ANGLE)])
+#: Beyond this many standard deviations a Gaussian counts as wholly on one side of an edge.
+GAUSSIAN_REACH = 4.0
+
+
+def _straddling(
+    coverage: Coverage, centre: np.ndarray, reach: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """The share in view of the discs of radius ``reach_i`` about ``centre_i`` that lie
+    wholly outside (0) or inside (1) the coverage, and the rows of those that straddle its
+    edge (their share left at 1, to be found)."""
+    out = coverage.contains(centre, reach).astype(float)
+    partial = np.flatnonzero(out > 0.0)
+    if partial.size:
+        partial = partial[~coverage.holds(centre[partial], reach[partial])]
+    return out, partial
+
+
+def _share(coverage: Coverage, points: np.ndarray) -> np.ndarray:
+    """The share of each row's sample points ``points (n, S, 2)`` in view."""
+    n = points.shape[0]
+    return coverage.contains(points.reshape(-1, 2)).reshape(n, -1).mean(axis=1)
+
+
+def visible_fraction(coverage: Coverage, mean: np.ndarray, cov: np.ndarray) -> np.ndarray:
+    """``f_i = P(x ∈ coverage)`` for ``x ~ N(mean_i, cov_i)`` (``mean (N, 2)``, ``cov (N, 2,
+    2)``): 0 or 1 when the ellipse of :data:`GAUSSIAN_REACH` standard deviations lies wholly
+    outside or inside, else the share of :data:`SAMPLES` points ``mean_i + L_i u_k``
+    (``L_i L_iᵀ = cov_i``, ``u_k`` a fixed spread of the standard normal) in view."""
+    mean = np.asarray(mean, dtype=float).reshape(-1, 2)
+    cov = np.asarray(cov, dtype=float).reshape(-1, 2, 2)
+    a, b, d = cov[:, 0, 0], 0.5 * (cov[:, 0, 1] + cov[:, 1, 0]), cov[:, 1, 1]
+    lam = 0.5 * (a + d) + np.sqrt(0.25 * (a - d) ** 2 + b * b)
+    out, partial = _straddling(coverage, mean, GAUSSIAN_REACH * np.sqrt(np.maximum(lam, 0.0)))
+    if partial.size:
+        # L = [[l11, 0], [l21, l22]] (closed form; a zero variance floored)
+        a, b, d = a[partial, None], b[partial, None], d[partial, None]
+        l11 = np.sqrt(np.maximum(a, 1e-300))
+        l21 = b / l11
+        l22 = np.sqrt(np.maximum(d - l21 * l21, 0.0))
+        u, w = _NORMAL[None, :, 0], _NORMAL[None, :, 1]
+        pts = np.stack([l11 * u, l21 * u + l22 * w], axis=2) + mean[partial, None, :]
+        out[partial] = _share(coverage, pts)
+    return out
+
+
+def disc_fraction(coverage: Coverage, centre: np.ndarray, radius: np.ndarray) -> np.ndarray:
+    """``f_i``, the share of the disc of ``radius_i`` about ``centre_i (N, 2)`` in view: 0 or
+    1 when the disc lies wholly outside or inside, else the share of :data:`SAMPLES` points
+    spread evenly over it."""
+    centre = np.asarray(centre, dtype=float).reshape(-1, 2)
+    radius = np.broadcast_to(np.asarray(radius, dtype=float), (centre.shape[0],))
+    out, partial = _straddling(coverage, centre, radius)
+    if partial.size:
+        pts = centre[partial, None, :] + radius[partial, None, None] * _DISC[None]
+        out[partial] = _share(coverage, pts)
+    return out
+
+
+#: One scan's detections: their box ``(x0, y0, x1, y1)`` and largest noise σ (m), or None.
+Box = tuple[float, float, float, float, float] | None
+#: What a :class:`CoverageLearner` knows, least recently heard sensor first: each sensor's id,
+#: when it was last heard and the boxes of its last :data:`LEARN_SCANS` scans.
+LearnerSnapshot = tuple[tuple[str, float, tuple[Box, ...]], ...]
+
 
 class CoverageLearner:
     """The coverage of scans that state none, from where each sensor has been seeing things
     (module docstring). :meth:`coverage` answers for a scan without changing anything;
-    :meth:`learn` records the scan once it has been processed."""
+    :meth:`learn` records the scan once it has been processed; :meth:`snapshot` and
+    :meth:`restored` save and restore what it knows (with the tracks, so that a restored
+    tracker goes on as the one saved)."""
 
     def __init__(self) -> None:
-        #: each sensor's last LEARN_SCANS scans: their detections' box and noise, or None
-        self._boxes: dict[str, deque[tuple[float, float, float, float, float] | None]] = {}
+        #: each sensor's last LEARN_SCANS scans (a tuple, replaced at each: snapshots share it)
+        self._boxes: dict[str, tuple[Box, ...]] = {}
         #: when each sensor was last heard, least recently first
         self._heard: OrderedDict[str, float] = OrderedDict()
 
@@ -209,7 +342,8 @@ class CoverageLearner:
         """Record a processed scan."""
         self._heard[sensor_id] = t
         self._heard.move_to_end(sensor_id)
-        self._boxes.setdefault(sensor_id, deque(maxlen=LEARN_SCANS)).append(self._box(z, R))
+        kept = self._boxes.get(sensor_id, ())[-(LEARN_SCANS - 1) :]
+        self._boxes[sensor_id] = (*kept, self._box(z, R))
         while len(self._heard) > MAX_SENSORS:
             gone, _ = self._heard.popitem(last=False)
             self._boxes.pop(gone, None)
@@ -217,3 +351,53 @@ class CoverageLearner:
         for sid in stale:
             del self._heard[sid]
             self._boxes.pop(sid, None)
+
+    def snapshot(self) -> LearnerSnapshot:
+        """What the learner knows now, immutable (its boxes are shared, not copied)."""
+        return tuple((sid, t, self._boxes.get(sid, ())) for sid, t in self._heard.items())
+
+    @staticmethod
+    def export(snapshot: LearnerSnapshot) -> dict[str, Any]:
+        """``snapshot`` as plain JSON values: ``{"sensors": [{"id", "heard", "boxes"}]}``."""
+        return {
+            "sensors": [
+                {"id": sid, "heard": t, "boxes": [None if b is None else list(b) for b in boxes]}
+                for sid, t, boxes in snapshot
+            ]
+        }
+
+    @classmethod
+    def restored(cls, values: Any) -> CoverageLearner:
+        """A learner knowing what :meth:`export` wrote; ``ValueError`` naming what is wrong
+        with anything else (nothing is half restored)."""
+        sensors = values.get("sensors") if isinstance(values, dict) else None
+        if not isinstance(sensors, list) or len(sensors) > MAX_SENSORS:
+            raise ValueError(f"coverage: 'sensors' must be a list of at most {MAX_SENSORS}")
+        out = cls()
+        for k, entry in enumerate(sensors):
+            where = f"coverage.sensors[{k}]"
+            if not isinstance(entry, dict) or not isinstance(entry.get("id"), str):
+                raise ValueError(f"{where}: an object with a string 'id'")
+            t, boxes = entry.get("heard"), entry.get("boxes")
+            if isinstance(t, bool) or not isinstance(t, int | float) or not math.isfinite(t):
+                raise ValueError(f"{where}.heard: a finite number")
+            if not isinstance(boxes, list) or len(boxes) > LEARN_SCANS:
+                raise ValueError(f"{where}.boxes: a list of at most {LEARN_SCANS}")
+            read: list[Box] = []
+            for b in boxes:
+                if b is None:
+                    read.append(None)
+                    continue
+                ok = isinstance(b, list) and len(b) == 5
+                ok = ok and all(
+                    isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v)
+                    for v in b
+                )
+                if not ok or b[0] > b[2] or b[1] > b[3] or b[4] < 0:
+                    raise ValueError(f"{where}.boxes: [x0, y0, x1, y1, sigma] or null each")
+                read.append((float(b[0]), float(b[1]), float(b[2]), float(b[3]), float(b[4])))
+            if entry["id"] in out._heard:
+                raise ValueError(f"{where}.id: {entry['id']!r} twice")
+            out._heard[entry["id"]] = float(t)
+            out._boxes[entry["id"]] = tuple(read)
+        return out

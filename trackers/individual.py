@@ -35,6 +35,7 @@ from trackers.association.gnn import gnn_assign
 from trackers.association.manoeuvre import ManoeuvreMatch, manoeuvre_search, reaches_beyond
 from trackers.association.spatial import pairs_within
 from trackers.config import InitiationConfig, TrackerConfig
+from trackers.coverage import disc_fraction, visible_fraction
 from trackers.detection_rate import (
     LOOK_MIN_HITS,
     MIN_MISSES,
@@ -430,6 +431,7 @@ class IndividualTracker:
         rivals = np.zeros(0, dtype=bool)  # tentative tracks that lost to a rival of their origin
         losers = winners = np.zeros(0, dtype=np.intp)  # siblings not the likeliest, and it
         seen: np.ndarray | None = None  # old tracks in the scan's view (None: all)
+        visible: np.ndarray | None = None  # the share of each one's position in view
         range_rates = (0, 0)
         established = np.zeros(scan.size, dtype=bool)
         held = HeldDetections.none()
@@ -443,7 +445,8 @@ class IndividualTracker:
                     if p is not None:
                         pd[i] = p
             masked = np.minimum(pd / pd_sensor, 1.0)
-            seen = _in_view(pred, scan)
+            visible = _visible(pred, scan)
+            seen = None if visible is None else visible > 0.0
             # The manoeuvre search reaches as far as a track may coast at P_D 0.9 (a target
             # missed more often is looked for in its gate only: the search's reach grows as
             # τ², and a track lost for long found clutter with it and flew off).
@@ -457,9 +460,9 @@ class IndividualTracker:
                     interval,
                 ) <= tm.max_coast_time
             tracks, claims, range_rates, established, gated, held = self._update_existing(
-                pred, scan, pd, lam_fa, seen, searching, serial
+                pred, scan, pd, lam_fa, visible, searching, serial
             )
-            look = _looks(pred.tracks, seen, masked, t, pd_coast)
+            look = _looks(pred.tracks, visible, masked, t, pd_coast)
             looks = int(np.count_nonzero(look))
             detected = int(np.count_nonzero(look & (tracks.updated == t)))
             # Rivals are dropped with the deleted tracks below; those out of view wait for a
@@ -588,7 +591,7 @@ class IndividualTracker:
         scan: Scan,
         pd: np.ndarray,
         lam_fa: float | np.ndarray,
-        seen: np.ndarray | None,
+        visible: np.ndarray | None,
         searching: np.ndarray | None,
         serial: int,
     ) -> tuple[
@@ -603,8 +606,9 @@ class IndividualTracker:
         each detection's *claim* (``lam_fa`` the false-alarm density, one or one a detection):
         ``+inf`` where a confirmed track took it or has it in its
         gate, the updated score of the tentative track that took it, ``−inf`` where it is
-        free. A track that is not ``seen`` (out of the scan's coverage; ``None``: all are) and
-        takes no detection keeps its score: it was not missed, only not looked at. Last, the
+        free. A track that takes no detection was missed with probability ``P_D f``, ``f`` the
+        share of its predicted position in the scan's coverage (``visible``; ``None``: all of
+        it): out of view (``f`` = 0) it keeps its score, not missed, only not looked at. Last, the
         number of range-rates of the detections confirmed tracks took, and of those used
         (inside their gate), the detections taken by tracks of at least
         :data:`ESTABLISHED_HITS` detections (whatever their instants: a target's, not
@@ -633,6 +637,7 @@ class IndividualTracker:
         taken[dj[sel]] = True
         # A confirmed track with nothing in its gate looks again, within the reach of a
         # manoeuvre since its last update, among the detections no confirmed track gates.
+        seen = None if visible is None else visible > 0.0
         found = _manoeuvre_found(pred, scan, ti[sel], dj[first], pd, lam_fa, seen, searching)
         if found is not None:
             taken[found.detection] = True
@@ -655,8 +660,7 @@ class IndividualTracker:
             )
 
         x, P, mu = x_pred.copy(), P_pred.copy(), c_bar.copy()
-        missed = miss_increment(pd)
-        score = tracks.score + (missed if seen is None else np.where(seen, missed, 0.0))
+        score = tracks.score + miss_increment(pd if visible is None else pd * visible)
         xu, Pu, muu, hit = xu[sel], Pu[sel], muu[sel], hit[sel]
         if found is not None:
             at, ad = np.concatenate([at, found.track]), np.concatenate([ad, found.detection])
@@ -742,7 +746,7 @@ class IndividualTracker:
         t = float(scan.time)
         cand = self._state.candidates
         cand = cand.take(t - cand.time <= init.candidate_max_age)
-        looked = _candidates_in_view(cand, scan, init.max_speed, config.gating.threshold)
+        looked = _candidates_visible(cand, scan, config)
         two = pair_candidates(
             cand,
             scan.z,
@@ -786,12 +790,14 @@ class IndividualTracker:
             created=cand.time[two.candidate],
             origin=cand.origin[two.candidate],
         )
-        # The candidates go on as their missed branches while their score stays above T_d;
+        # The candidates go on as their missed branches while their score stays above T_d
+        # (missed with probability P_D times the share of their target's reach in view);
         # every free detection of this scan opens a new one.
         missed = t - cand.time >= MIN_PAIR_INTERVAL  # at the same instant: not missed
         if looked is not None:
-            missed &= looked  # nor out of view
-        score = np.where(missed, cand.score + float(miss_increment(pd)), cand.score)
+            missed &= looked > 0.0  # nor out of view
+        increment = miss_increment(pd if looked is None else pd * looked)
+        score = np.where(missed, cand.score + increment, cand.score)
         offered = cand.offered + missed
         keep = np.flatnonzero(score > tm.delete_threshold)
         idx = np.flatnonzero(claims == -np.inf)
@@ -1417,27 +1423,37 @@ def _initial_scores(
     return initial_score_each(new_target_density, np.take(lam, rows))
 
 
-def _candidates_in_view(
-    cand: Candidates, scan: Scan, max_speed: float, gamma: float
-) -> np.ndarray | None:
-    """Whether each candidate's target may be in the scan's view: its detection, grown by its
-    gate and by ``max_speed`` times the time since, reaches into the coverage; all of them
-    ``None`` (all) when the scan covers everything."""
+def _candidates_visible(cand: Candidates, scan: Scan, config: TrackerConfig) -> np.ndarray | None:
+    """The share of each candidate's target's possible positions in the scan's view, under
+    the two-point prior (:mod:`trackers.initiation`) after ``Δt`` since its detection: with
+    weight ``w`` (``slow_target_fraction``) a slow target,
+    ``N(z_c, R_c + (σ_v² Δt² + q Δt³/3) I)`` (:func:`~trackers.coverage.visible_fraction`),
+    else one anywhere within ``v_max Δt`` plus its gate (:func:`~trackers.coverage.disc_fraction`):
+
+        f = w f_slow + (1 − w) f_fast.
+
+    ``None`` (all of it) when the scan covers everything. A radar's candidate 100 m outside a
+    camera's square is not missed by the camera's scans ten times a second (it was, when any
+    reach into the view counted as a look, and the radar started no track there)."""
     if scan.coverage is None:
         return None
-    reach = np.sqrt(gamma * max_eigenvalue_2x2(cand.R)) + max_speed * np.maximum(
-        float(scan.time) - cand.time, 0.0
-    )
-    return scan.coverage.contains(cand.z, reach)
+    init = config.initiation
+    dt = np.maximum(float(scan.time) - cand.time, 0.0)
+    spread = init.velocity_std**2 * dt**2 + config.motion.q_cv * dt**3 / 3.0
+    slow = visible_fraction(scan.coverage, cand.z, cand.R + spread[:, None, None] * np.eye(2))
+    reach = np.sqrt(config.gating.threshold * max_eigenvalue_2x2(cand.R)) + init.max_speed * dt
+    fast = disc_fraction(scan.coverage, cand.z, reach)
+    w = init.slow_target_fraction
+    return w * slow + (1.0 - w) * fast
 
 
-def _in_view(pred: _Prediction, scan: Scan) -> np.ndarray | None:
-    """Whether each predicted track is in the scan's coverage, or its gate reaches into it
-    (``√(γ λ_max(P))`` from its edge); ``None`` (all) when the scan covers everything."""
+def _visible(pred: _Prediction, scan: Scan) -> np.ndarray | None:
+    """The share of each predicted track's position distribution ``N(x̂, P̂)`` in the scan's
+    coverage (:func:`~trackers.coverage.visible_fraction`); ``None`` (all) when the scan
+    covers everything. A scan misses a track with probability ``P_D`` times it."""
     if scan.coverage is None:
         return None
-    reach = np.sqrt(pred.config.gating.threshold * max_eigenvalue_2x2(pred.Pc[:, :2, :2]))
-    return scan.coverage.contains(pred.xc[:, :2], reach)
+    return visible_fraction(scan.coverage, pred.xc[:, :2], pred.Pc[:, :2, :2])
 
 
 def _with_range_rates(
@@ -1617,21 +1633,26 @@ def _crowded_gates(
 
 
 def _looks(
-    tracks: TrackArrays, seen: np.ndarray | None, masked: np.ndarray, t: float, pd: float
+    tracks: TrackArrays, visible: np.ndarray | None, masked: np.ndarray, t: float, pd: float
 ) -> np.ndarray:
     """Mask of the tracks (before this scan's update) that count as a look of the sensor at
     an established target (:mod:`trackers.detection_rate`): confirmed, with at least
-    :data:`~trackers.detection_rate.LOOK_MIN_HITS` detections, in view, outside every peer's
+    :data:`~trackers.detection_rate.LOOK_MIN_HITS` detections, in view (at least
+    :data:`LOOK_MIN_VISIBLE` of its position, ``visible``), outside every peer's
     resolution cell, and detected within 1.5 revisits ``T̂`` (the track's, as in
     :func:`_coast_rate`): a target missed since counts its first miss only, and a sector of a
     revolution counts the tracks it detected a revolution before."""
     look = tracks.confirmed & (tracks.hits >= LOOK_MIN_HITS)
     look &= t - tracks.updated <= 1.5 * _revisit(tracks, pd)
     look &= masked >= 1.0
-    if seen is not None:
-        look &= seen
+    if visible is not None:
+        look &= visible >= LOOK_MIN_VISIBLE
     return look
 
+
+#: A track counts as a look of the sensor when at least this share of its predicted position
+#: is in the scan's view (:func:`_looks`): one at the edge of the view says little of P_D.
+LOOK_MIN_VISIBLE = 0.95
 
 #: The acceleration a relinked target may have had, at least (m/s²): a car pulling away, a
 #: helicopter leaving its hover (the turn-rate bound ``ω_max |v|`` is nothing at rest).

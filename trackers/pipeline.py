@@ -25,7 +25,7 @@ import numpy as np
 
 from trackers.clutter import ClutterMap
 from trackers.config import TrackerConfig
-from trackers.coverage import CoverageLearner
+from trackers.coverage import CoverageLearner, LearnerSnapshot
 from trackers.extended.tracker import ExtendedTracker
 from trackers.formation.tracker import FormationTracker
 from trackers.individual import IndividualTracker
@@ -44,7 +44,7 @@ from trackers.peers import (
     check_proposal,
     combine_directives,
 )
-from trackers.state import PipelineState, StateError
+from trackers.state import PipelineState, StateError, StateSection
 from trackers.types import Scan, ScanRejected, StepResult, TrackSnapshot
 
 __all__ = [
@@ -182,11 +182,13 @@ class PipelineCheckpoint:
         point_kind: str,
         point: StateCheckpoint,
         peers: tuple[tuple[str, StateCheckpoint], ...],
+        coverage: LearnerSnapshot = (),
     ) -> None:
         self.last_time = last_time
         self.point_kind = point_kind
         self._point = point
         self._peers = peers
+        self._coverage = coverage
 
     def export(self) -> PipelineState:
         return PipelineState(
@@ -194,6 +196,7 @@ class PipelineCheckpoint:
             point_kind=self.point_kind,
             point=self._point.export(),
             peers={kind: cp.export() for kind, cp in self._peers},
+            learned={"coverage": StateSection(CoverageLearner.export(self._coverage), {})},
         )
 
 
@@ -412,7 +415,9 @@ class TrackingPipeline:
             for peer in self.peers
             if isinstance(peer, PersistentTracker)
         )
-        return PipelineCheckpoint(self._last_time, point.kind, take(), peers)
+        return PipelineCheckpoint(
+            self._last_time, point.kind, take(), peers, self._coverage.snapshot()
+        )
 
     def export_state(self) -> PipelineState:
         """The state as plain data (:mod:`trackers.state`)."""
@@ -438,6 +443,14 @@ class TrackingPipeline:
         point_time = state.point.values.get("time")
         if isinstance(point_time, int | float) and (last is None or not point_time <= last):
             raise StateError(f"the point tracker's time {point_time!r} is after {last!r}")
+        coverage = None
+        for name, section in state.learned.items():
+            if name != "coverage":
+                raise StateError(f"the saved state holds learned {name!r}, unknown here")
+            try:
+                coverage = CoverageLearner.restored(dict(section.values))
+            except ValueError as exc:
+                raise StateError(str(exc)) from None
         peers = {p.kind: p for p in self.peers}
         checked: list[tuple[PersistentTracker, Any]] = [(point, point.check_state(state.point))]
         for kind, section in state.peers.items():
@@ -448,6 +461,8 @@ class TrackingPipeline:
         for tracker, value in checked:
             tracker.restore_state(value)
         self._last_time = last
+        if coverage is not None:  # (a file without it: the boxes are learned again)
+            self._coverage = coverage
         # the detections tentative tracks held back belong to tracks and serial numbers of
         # the state left: the restored tracker gives those numbers and ids again
         self._clutter.forget_held()

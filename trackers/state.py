@@ -78,12 +78,15 @@ class StateSection:
 @dataclass(frozen=True, eq=False)
 class PipelineState:
     """The whole pipeline: its last processed time, the point tracker's kind and section,
-    and a section per peer kind (none today)."""
+    a section per peer kind, and ``learned``, a section per thing the pipeline learns of
+    the sensors outside the trackers (``coverage``: the learned coverage boxes; values only,
+    absent from files written before it was saved)."""
 
     last_time: float | None
     point_kind: str
     point: StateSection
     peers: Mapping[str, StateSection] = field(default_factory=dict)
+    learned: Mapping[str, StateSection] = field(default_factory=dict)
 
 
 # -- strings in arrays ----------------------------------------------------------------------
@@ -330,12 +333,18 @@ def encode_state(state: PipelineState, meta: Mapping[str, Any] | None = None) ->
         if not _NAME.match(kind):
             raise StateError(f"peer kind {kind!r}: not a valid name")
         peers[kind] = {"values": dict(section.values)}
+    learned: dict[str, Any] = {}
+    for name, section in state.learned.items():
+        if not _NAME.match(name) or section.arrays:
+            raise StateError(f"learned {name!r}: a valid name, with values only")
+        learned[name] = {"values": dict(section.values)}
     header = {
         "format": FORMAT,
         "version": VERSION,
         "last_time": state.last_time,
         "point": {"kind": state.point_kind, "values": dict(state.point.values)},
         "peers": peers,
+        "learned": learned,
         "meta": dict(meta or {}),
     }
     text = json.dumps(_json_safe(header, "header"), allow_nan=False, separators=(",", ":"))
@@ -422,6 +431,9 @@ def decode_state(data: bytes) -> tuple[PipelineState, dict[str, Any]]:
         peers_header = header.get("peers")
         if not isinstance(peers_header, dict) or not all(_NAME.match(k) for k in peers_header):
             raise StateError("header.peers: must be an object keyed by peer kind")
+        learned_header = header.get("learned", {})  # (absent from older files)
+        if not isinstance(learned_header, dict) or not all(_NAME.match(k) for k in learned_header):
+            raise StateError("header.learned: must be an object keyed by name")
         meta = header.get("meta")
         if not isinstance(meta, dict):
             raise StateError("header.meta: must be an object")
@@ -447,6 +459,10 @@ def decode_state(data: bytes) -> tuple[PipelineState, dict[str, Any]]:
         peers={
             k: StateSection(_section_values(v, f"peers.{k}"), peer_arrays[k])
             for k, v in peers_header.items()
+        },
+        learned={
+            k: StateSection(_section_values(v, f"learned.{k}"), {})
+            for k, v in learned_header.items()
         },
     )
     return state, meta

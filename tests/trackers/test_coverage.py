@@ -8,10 +8,13 @@ import pytest
 from trackers.config import TrackerConfig
 from trackers.coverage import (
     LEARN_SCANS,
+    SAMPLES,
     Coverage,
     CoverageLearner,
+    disc_fraction,
     point_in_polygon,
     polygon_distance,
+    visible_fraction,
 )
 from trackers.pipeline import TrackingPipeline
 from trackers.types import Scan
@@ -327,3 +330,125 @@ def test_the_learner_remembers_a_bounded_number_of_sensors() -> None:
         learner.learn(f"s{i}", float(i), np.zeros((1, 2)), _R2(1, 1.0))
     assert len(learner._heard) == MAX_SENSORS and len(learner._boxes) == MAX_SENSORS
     assert "s0" not in learner._heard and f"s{MAX_SENSORS + 9}" in learner._heard
+
+
+def test_the_visible_share_of_a_gaussian_and_of_a_disc() -> None:
+    """Exactly 0 or 1 away from the edge; on a straight edge through the centre one half, at
+    a corner one quarter, within the sample spread (1/64 a point, the spiral's asymmetry);
+    a disc across the edge of a circle of range as its area says."""
+    box = Coverage.box(np.array([-100.0, -100.0]), np.array([100.0, 100.0]))
+    mean = np.array([[0.0, 0.0], [100.0, 0.0], [100.0, 100.0], [300.0, 0.0], [60.0, 0.0]])
+    cov = np.tile(np.diag([100.0, 400.0]), (5, 1, 1))
+    f = visible_fraction(box, mean, cov)
+    assert f[0] == 1.0 and f[3] == 0.0 and f[4] == 1.0  # (4 sigma clear of the edge)
+    assert abs(f[1] - 0.5) <= 3 / SAMPLES and abs(f[2] - 0.25) <= 3 / SAMPLES
+    # a correlated covariance, half of it beyond the edge x = 100
+    rot = np.array([[900.0, 700.0], [700.0, 900.0]])
+    assert abs(visible_fraction(box, mean[1:2], rot[None])[0] - 0.5) <= 3 / SAMPLES
+    d = disc_fraction(box, mean, np.array([50.0, 50.0, 50.0, 150.0, 30.0]))
+    assert d[0] == 1.0 and d[3] == 0.0 and d[4] == 1.0
+    assert abs(d[1] - 0.5) <= 3 / SAMPLES and abs(d[2] - 0.25) <= 3 / SAMPLES
+    # a disc of radius 100 centred on the edge of a 1 km range: about half of it inside
+    rng = Coverage(centre=np.zeros(2), max_range=1000.0)
+    assert abs(disc_fraction(rng, np.array([[1000.0, 0.0]]), np.array([100.0]))[0] - 0.5) < 0.06
+    assert visible_fraction(Coverage.none(), mean, cov).tolist() == [0.0] * 5
+
+
+def test_holds_is_inside_with_room_to_spare() -> None:
+    box = Coverage.box(np.array([0.0, 0.0]), np.array([10.0, 10.0]))
+    pts = np.array([[5.0, 5.0], [5.0, 5.0], [1.0, 5.0], [11.0, 5.0]])
+    assert box.holds(pts, np.array([4.0, 6.0, 0.5, 0.0])).tolist() == [True, False, True, False]
+    disc = Coverage(centre=np.zeros(2), max_range=10.0)
+    assert disc.holds(np.array([[5.0, 0.0], [5.0, 0.0]]), np.array([4.0, 6.0])).tolist() == [
+        True,
+        False,
+    ]
+
+
+def _junction(camera: bool, seed: int) -> tuple[int, int]:
+    """A radar at 1 s (3 m noise) sees a car driving east at 10 m/s 150 m south of a camera's
+    200 m square, which reports ten times a second (stating its coverage) and never sees the
+    car. Returns the radar scans until the car's track is confirmed (99 if never) and the
+    confirmed tracks within 20 m of it at the end."""
+    rng = np.random.default_rng(seed)
+    square = [[-100.0, -100.0], [100.0, -100.0], [100.0, 100.0], [-100.0, 100.0]]
+    cam = Coverage(polygon=np.array(square))
+    pipe = TrackingPipeline.all_kinds(TrackerConfig())
+    first = 99
+    held = 0
+    for k in range(20):
+        t = float(k)
+        car = np.array([-150.0 + 10.0 * t, -250.0])
+        z = (car + rng.normal(0, 3, 2))[None] if rng.random() < 0.9 else np.zeros((0, 2))
+        res = pipe.process(Scan("radar", t, z, _R2(len(z), 3.0)))
+        held = sum(np.hypot(*(np.array(tr.position) - car)) < 20 for tr in res.confirmed())
+        if held and first == 99:
+            first = k
+        for j in range(1, 10) if camera else ():
+            pipe.process(Scan("camera", t + 0.1 * j, np.zeros((0, 2)), _R2(0, 0.5), coverage=cam))
+    return first, held
+
+
+def test_a_camera_watching_a_square_does_not_stop_a_radar_starting_tracks_outside_it() -> None:
+    """Before, any overlap of where a radar detection's target might have gone (700 m/s
+    times the time since) with the camera's square counted as a full look: the camera's
+    batches ten times a second missed every waiting detection and young track 150 m
+    outside it, and the radar confirmed nothing. Now they are missed by the share of their
+    reach in the square: the car is confirmed as soon as with the radar alone."""
+    for seed in range(3):
+        alone, _ = _junction(False, seed)
+        with_camera, held = _junction(True, seed)
+        assert alone <= 6 and with_camera <= alone + 1 and held == 1, (seed, alone, with_camera)
+
+
+def test_the_learner_saves_and_restores_what_it_knows() -> None:
+    learner = CoverageLearner()
+    for k in range(LEARN_SCANS + 3):
+        z = np.array([[float(k), 2.0 * k]]) if k % 3 else np.zeros((0, 2))
+        learner.learn("a", float(k), z, _R2(len(z), 5.0))
+        learner.learn("b", k + 0.5, np.array([[1e4, 0.0]]), _R2(1, 20.0))
+    values = CoverageLearner.export(learner.snapshot())
+    again = CoverageLearner.restored(values)
+    assert again.snapshot() == learner.snapshot()
+    z, R = np.array([[3.0, 4.0]]), _R2(1, 5.0)
+    a, b = learner.coverage("a", 40.0, z, R), again.coverage("a", 40.0, z, R)
+    assert a is not None and b is not None and np.array_equal(a.polygon, b.polygon)
+    assert len(values["sensors"][0]["boxes"]) == LEARN_SCANS
+
+
+@pytest.mark.parametrize(
+    ("values", "text"),
+    [
+        ({}, "'sensors'"),
+        ({"sensors": [{"id": 3}]}, "string 'id'"),
+        ({"sensors": [{"id": "a", "heard": "x", "boxes": []}]}, "heard"),
+        ({"sensors": [{"id": "a", "heard": 1.0, "boxes": [[0, 0, 1]]}]}, "boxes"),
+        ({"sensors": [{"id": "a", "heard": 1.0, "boxes": [[2, 0, 1, 1, 1]]}]}, "boxes"),
+        ({"sensors": [{"id": "a", "heard": 1.0, "boxes": [None] * (LEARN_SCANS + 1)}]}, "at most"),
+        ({"sensors": [{"id": "a", "heard": 1.0, "boxes": []}] * 2}, "twice"),
+    ],
+)
+def test_a_bad_saved_learner_is_refused(values: dict, text: str) -> None:
+    with pytest.raises(ValueError, match=text):
+        CoverageLearner.restored(values)
+
+
+def test_a_box_is_tested_by_comparisons_with_the_polygons_answers() -> None:
+    """A box as ``Coverage.box`` makes it takes the comparison path; the same rectangle
+    listed from another corner takes the polygon path: both give the same answers, with
+    and without margins, inside, outside, near corners and on the edges."""
+    rng = np.random.default_rng(5)
+    box = Coverage.box(np.array([-10.0, 0.0]), np.array([30.0, 20.0]))
+    poly = Coverage(polygon=np.array([[30.0, 0.0], [30.0, 20.0], [-10.0, 20.0], [-10.0, 0.0]]))
+    assert "_bounds" in box.__dict__ and "_bounds" not in poly.__dict__
+    pts = np.vstack(
+        [rng.uniform(-30, 50, (400, 2)), [[-10.0, 5.0], [30.0, 5.0], [0.0, 0.0], [0.0, 20.0]]]
+    )
+    for margin in (0.0, rng.uniform(0, 15, len(pts))):
+        assert box.contains(pts, margin).tolist() == poly.contains(pts, margin).tolist()
+    room = rng.uniform(0, 15, len(pts))
+    assert box.holds(pts, room).tolist() == poly.holds(pts, room).tolist()
+    disc = Coverage(polygon=box.polygon, centre=np.zeros(2), max_range=25.0)
+    assert disc.contains(pts, 3.0).tolist() == (
+        poly.contains(pts, 3.0) & (np.hypot(*pts.T) <= 28.0)
+    ).tolist()

@@ -497,3 +497,32 @@ def test_each_peer_kind_has_a_section_of_its_own(scans: list[Scan]) -> None:
     with pytest.raises(StateError, match="counter"):
         r.import_state(bad)
     assert r.snapshot() == () and r.last_time is None
+
+
+def test_the_learned_coverage_is_saved_with_the_tracks() -> None:
+    """Two radars, no coverage stated: the boxes learned of each are in the state, come
+    back with it, and a file without them (written before they were saved) still loads."""
+    from clients.scenarios.formation import environment_2, simulate_formations
+
+    sims = simulate_formations(environment_2(1, 2, seed=0, scans=6))
+    a = TrackingPipeline()
+    for s in sims:
+        a.process(s.to_scan())
+    state = a.export_state()
+    sensors = state.learned["coverage"].values["sensors"]
+    assert sorted(s["id"] for s in sensors) == ["radar-1", "radar-2", "radar-3"]
+    b = restarted(a)
+    assert b.export_state().learned["coverage"].values == state.learned["coverage"].values
+    old = PipelineState(state.last_time, state.point_kind, state.point, state.peers)
+    c = TrackingPipeline()
+    c.import_state(decode_state(encode_state(old))[0])
+    assert c.export_state().learned["coverage"].values == {"sensors": []}
+    bad = PipelineState(
+        state.last_time,
+        state.point_kind,
+        state.point,
+        state.peers,
+        {"coverage": StateSection({"sensors": [{"id": 1}]}, {})},
+    )
+    with pytest.raises(StateError, match=r"coverage\.sensors\[0\]"):
+        TrackingPipeline().import_state(bad)
