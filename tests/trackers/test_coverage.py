@@ -449,6 +449,7 @@ def test_a_box_is_tested_by_comparisons_with_the_polygons_answers() -> None:
     room = rng.uniform(0, 15, len(pts))
     assert box.holds(pts, room).tolist() == poly.holds(pts, room).tolist()
     disc = Coverage(polygon=box.polygon, centre=np.zeros(2), max_range=25.0)
-    assert disc.contains(pts, 3.0).tolist() == (
-        poly.contains(pts, 3.0) & (np.hypot(*pts.T) <= 28.0)
-    ).tolist()
+    assert (
+        disc.contains(pts, 3.0).tolist()
+        == (poly.contains(pts, 3.0) & (np.hypot(*pts.T) <= 28.0)).tolist()
+    )
