@@ -453,3 +453,21 @@ def test_a_box_is_tested_by_comparisons_with_the_polygons_answers() -> None:
         disc.contains(pts, 3.0).tolist()
         == (poly.contains(pts, 3.0) & (np.hypot(*pts.T) <= 28.0)).tolist()
     )
+
+
+def test_the_samples_of_a_many_sided_polygon_stay_within_a_budget() -> None:
+    """On a polygon of 1024 vertices (not a box), shapes at its edge get all the sample
+    points when few, every k-th when more, and count as wholly in view (the rule before
+    shares were taken) when even a few each would cost too much."""
+    from trackers.coverage import MIN_SAMPLES, SAMPLE_BUDGET
+
+    ang = np.linspace(0, 2 * np.pi, 1024, endpoint=False)
+    circle = Coverage(polygon=np.column_stack([1000 * np.cos(ang), 1000 * np.sin(ang)]))
+    for n in (4, SAMPLE_BUDGET // (SAMPLES * 1024) * 4, SAMPLE_BUDGET // (MIN_SAMPLES * 1024) + 8):
+        a = np.linspace(0, 2 * np.pi, n, endpoint=False)
+        edge = np.column_stack([1000 * np.cos(a), 1000 * np.sin(a)])
+        f = disc_fraction(circle, edge, np.full(n, 100.0))
+        if n * MIN_SAMPLES * 1024 > SAMPLE_BUDGET:
+            assert (f == 1.0).all()
+        else:
+            assert abs(f.mean() - 0.5) < 0.06 and (f < 1.0).all()
