@@ -169,7 +169,8 @@ class _Grid:
 
     def add(self, keys: np.ndarray, weights: np.ndarray) -> None:
         """Add ``weights`` (as of now) to the cells of the distinct packed ``keys``, new
-        cells included."""
+        cells included; too many cells then, and four become one (their counts summed), as
+        often as needed."""
         rows, old = self.find(keys)
         if old.any():
             rows = rows[old]
@@ -184,6 +185,8 @@ class _Grid:
             self.stamps = np.concatenate(
                 [self.stamps, np.full(int(new.sum()), self.scans, dtype=np.int64)]
             )[order]
+        while self.keys.size > MAX_CELLS:
+            _coarsen(self)
 
 
 def _coarsen(grid: _Grid) -> None:
@@ -274,10 +277,7 @@ class ClutterMap:
         grid.boxes.append((float(lo[0]), float(lo[1]), float(hi[0]), float(hi[1])))
         keys, n = np.unique(grid.cells(z), return_counts=True)
         grid.add(keys, n.astype(float))  # of scan number ``scans``: they count in full
-        # Too many cells: four become one (their counts summed), as often as needed. Cells
-        # whose count has decayed to nothing are dropped now and then.
-        while grid.keys.size > MAX_CELLS:
-            _coarsen(grid)
+        # Cells whose count has decayed to nothing are dropped now and then.
         if grid.scans % int(MEMORY_SCANS) == 0 and grid.keys.size:
             live = grid.decayed(np.arange(grid.keys.size)) > 1e-3
             grid.keys, grid.counts, grid.stamps = (
@@ -351,8 +351,6 @@ class ClutterMap:
             keys, inverse = np.unique(grid.cells(z), return_inverse=True)
             grid.add(keys, np.bincount(inverse.ravel(), weights=weights, minlength=keys.size))
             grid.total += float(weights.sum())
-            while grid.keys.size > MAX_CELLS:
-                _coarsen(grid)
 
     def forget_held(self) -> None:
         """Drop every held-back detection (the tracks that held them are gone: a state

@@ -61,8 +61,11 @@ from typing import NamedTuple
 import numpy as np
 from scipy.spatial import cKDTree
 
-from trackers.association.gating import log_gaussian_2d, max_eigenvalue_2x2, position_noise
-from trackers.association.spatial import pairs_within
+from trackers.association.gating import (
+    gate,
+    log_gaussian_2d,
+    position_noise,
+)
 from trackers.config import ExtendedConfig, TrackerConfig, TrackManagementConfig
 from trackers.coverage import Coverage
 from trackers.extended.partition import (
@@ -449,9 +452,9 @@ class _PointGates:
     the detection lies in the track's gate, as index arrays (rows of the scan, indices into
     the confirmed tracks) and squared Mahalanobis distances, found on first use: from the
     point tracker's own gate pairs of the scan (:attr:`PointTrackView.gated
-    <trackers.peers.PointTrackView>`) when its gate is as wide, else behind the spatial
-    pre-gate of :func:`trackers.association.spatial.pairs_within`; :meth:`theirs` computes
-    only the pairs it needs."""
+    <trackers.peers.PointTrackView>`) when its gate is as wide, else by the same gating
+    (:func:`trackers.association.gating.gate`) at the 99 % gate; :meth:`theirs` computes only
+    the pairs it needs."""
 
     def __init__(self, view: PointTrackView, scan: Scan, min_hits: int | None = None) -> None:
         # min_hits: tentative tracks of that many detections or more are taken too
@@ -505,18 +508,8 @@ class _PointGates:
                     np.take(position, shared.track[inside]),
                     shared.d2[inside],
                 )
-        # pre-gate: within each track's gate radius for the widest detection covariance
-        radius = np.sqrt(
-            POINT_GATE * (max_eigenvalue_2x2(self.Pp) + float(np.max(max_eigenvalue_2x2(self._R))))
-        )
-        trk, det = pairs_within(self.xy, radius, self._z)
-        # np.take, not z[det]: several times faster for thousands of rows
-        m = _mahalanobis(
-            np.take(self._z, det, axis=0) - np.take(self.xy, trk, axis=0),
-            np.take(self.Pp, trk, axis=0) + np.take(self._R, det, axis=0),
-        )
-        inside = m <= POINT_GATE
-        return det[inside], trk[inside], m[inside]
+        own = gate(self.xy, self.Pp, self._z, self._R, POINT_GATE)
+        return own.detection, own.track, own.d2
 
     @property
     def det(self) -> np.ndarray:
