@@ -412,7 +412,9 @@ class ExtendedConfig:
     without detections. The resolution distance in force is at most
     ``resolution_noise_factor`` standard deviations of the position noise of the coarsest
     sensor heard in the last 60 s, and ``group_speed_spread`` shrinks by the same ratio (a
-    camera's pedestrians are no group).
+    camera's pedestrians are no group). A cluster must stand out from the clutter about it
+    (three times the detections that false alarms of the batch's density, stated or learned
+    for its sensor's whole scene, would put in its box: evenly spread clutter is no group).
     """
 
     enabled: bool = _field(True, "track extended objects and groups alongside individual targets")

@@ -347,6 +347,9 @@ class TrackingPipeline:
             learned["clutter_map"] = self._clutter.density(
                 scan.sensor_id, scan.z, tm.clutter_density
             )
+            learned["clutter_scene"] = self._clutter.scene_density(
+                scan.sensor_id, tm.clutter_density
+            )
         if learned:
             scan = replace(scan, **learned)
         if not self.peers:

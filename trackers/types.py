@@ -50,6 +50,9 @@ class Scan:
         sensor (an airborne radar), or ``None`` for a sensor at rest.
     clutter_map : ``(n,)`` false-alarm densities per m² at the detections, learned by the
         pipeline's clutter map for a scan that states no ``clutter_density`` (or ``None``).
+    clutter_scene : the false-alarm density per m² of the sensor's whole scene, learned by the
+        same map for such a scan (or ``None``): how far apart its false alarms lie on average
+        anywhere it looks, what a cluster of detections must beat to be a group.
     coverage : the area the sensor looked at (:class:`~trackers.coverage.Coverage`): a track
         outside it is not counted as missed. ``None``: everywhere, or, when several sensors
         report, where this one has been seeing things (the pipeline's learned coverage).
@@ -70,6 +73,7 @@ class Scan:
     sensor_velocity: np.ndarray | None = None
     coverage: Coverage | None = None
     clutter_map: np.ndarray | None = None
+    clutter_scene: float | None = None
 
     def __post_init__(self) -> None:
         z = np.asarray(self.z, dtype=float).reshape(-1, 2)
@@ -124,6 +128,7 @@ class Scan:
             sensor_velocity=self.sensor_velocity,
             coverage=self.coverage,
             clutter_map=None if self.clutter_map is None else self.clutter_map[idx],
+            clutter_scene=self.clutter_scene,
         )
 
 

@@ -773,7 +773,8 @@ class ExtendedTracker(SavesImmutableState):
             gone = tuple(tr.id for tr in state.tracks if tr.confirmed)
             new_state = replace(state, tracks=(), candidates=(), time=t, noise=())
             return PeerProposal(claimed=claimed, deleted=gone, state=new_state)
-        noise = remembered_noise(state.noise, scan.sensor_id, position_noise(scan.R), t)
+        sigma = position_noise(scan.R)
+        noise = remembered_noise(state.noise, scan.sensor_id, sigma, t)
         cfg = resolution_in_force(cfg, max((e[1] for e in noise), default=None))
         lam = tm.clutter_density if scan.clutter_density is None else float(scan.clutter_density)
         log_lam = math.log(lam)
@@ -922,7 +923,7 @@ class ExtendedTracker(SavesImmutableState):
             else tree.query_pairs(cfg.resolution_distance, output_type="ndarray")
         )
         born, candidates, next_id = self._births(
-            scan, view, claimed, pairs, point_gates, state, cfg, next_id, t
+            scan, view, claimed, pairs, point_gates, state, cfg, next_id, t, sigma or 0.0
         )
         for _, rows in born:
             claimed[rows] = True
@@ -947,10 +948,11 @@ class ExtendedTracker(SavesImmutableState):
 
     # -- births --------------------------------------------------------------------------------
 
-    def _births(self, scan, view, claimed, pairs, point_gates, state, cfg, next_id, t):
+    def _births(self, scan, view, claimed, pairs, point_gates, state, cfg, next_id, t, sigma):
         """New tracks from the clusters of the unclaimed detections (module docstring, step
         6); ``view`` the point tracks, ``pairs`` the pairs of the scan's detections closer
-        than the resolution distance (from the k-d tree the tracks used), if known; ``cfg``
+        than the resolution distance (from the k-d tree the tracks used), if known; ``sigma``
+        the scan's position noise (:func:`position_noise`); ``cfg``
         the configuration with the resolution distance in force."""
         tm = state.management
         free = ~claimed
@@ -973,6 +975,11 @@ class ExtendedTracker(SavesImmutableState):
             # track lost for a scan or two does not start one either).
             kept = _less_explained(subsets, point_gates())
             subsets = [rows for rows in kept if rows.size >= max(2, cfg.min_detections)]
+        if subsets:
+            stated = scan.clutter_density
+            subsets = _standing_out(
+                subsets, scan, scan.clutter_scene if stated is None else float(stated), sigma
+            )
         clusters = subsets
         centroids: list[tuple[float, float]] = []
         if clusters:  # every cluster's mean at once: sums over the clusters' runs of rows
@@ -1070,6 +1077,40 @@ def _not_acquiring(
     side, or with a rival track of the same start (cars entering a radar's view in a dense
     flow, whose tracks take a few scans to confirm)."""
     return _less_explained(clusters, _PointGates(view, scan, ESTABLISHED_HITS))
+
+
+#: A cluster is a group only if it holds this many times the detections that false alarms
+#: of the scan's density would put in its box (:func:`_standing_out`).
+GROUP_CONTRAST = 3.0
+
+
+def _standing_out(
+    clusters: list[np.ndarray], scan: Scan, clutter: float | None, sigma: float
+) -> list[np.ndarray]:
+    """The clusters (rows of the scan) that stand out from the clutter about them: those of
+    ``n`` detections with
+
+        n ≥ c λ (w + 4σ)(h + 4σ),
+
+    ``w × h`` the box of the cluster's detections grown by two standard deviations ``sigma``
+    of the scan's position noise on each side (all clusters at once), ``λ`` the false-alarm
+    density ``clutter`` (the scan's stated one, or its sensor's whole scene's as the clutter
+    map learned it; ``None``: every cluster) and ``c`` = :data:`GROUP_CONTRAST`. Chained at
+    the resolution distance, false alarms spread evenly over a sensor's small scene are one
+    cluster as dense as the scene itself (a radar over a 400 m road junction, 2-80 false
+    alarms a scan, no density stated: one extended track took the square and its targets); a
+    ship's returns, a convoy, a patch of backwash are many times denser than the clutter about
+    them (a lone ship's returns, which the map counts before its tracks hold them, about four
+    times)."""
+    if clutter is None or not clutter > 0:
+        return clusters
+    sizes = [rows.size for rows in clusters]
+    starts = list(itertools.accumulate(sizes[:-1], initial=0))
+    z = scan.z.take(np.concatenate(clusters), axis=0)
+    span = np.maximum.reduceat(z, starts, axis=0) - np.minimum.reduceat(z, starts, axis=0)
+    span += 4.0 * sigma
+    expected = GROUP_CONTRAST * clutter * span[:, 0] * span[:, 1]
+    return [rows for rows, e in zip(clusters, expected.tolist(), strict=True) if rows.size >= e]
 
 
 def _less_explained(clusters: list[np.ndarray], pg: _PointGates) -> list[np.ndarray]:
