@@ -1090,10 +1090,12 @@ def _standing_out(
     """The clusters (rows of the scan) that stand out from the clutter about them: those of
     ``n`` detections with
 
-        n ≥ c λ (w + 4σ)(h + 4σ),
+        n ≥ c λ (w + 4σ)(h + 4σ),    w, h = √(12 λ₁), √(12 λ₂),
 
-    ``w × h`` the box of the cluster's detections grown by two standard deviations ``sigma``
-    of the scan's position noise on each side (all clusters at once), ``λ`` the false-alarm
+    ``w × h`` the box of the cluster along its principal axes (``λ₁``, ``λ₂`` the
+    eigenvalues of its detections' scatter matrix: the sides of a uniformly filled
+    rectangle, whatever its heading), grown by two standard deviations ``sigma`` of the
+    scan's position noise on each side (all clusters at once), ``λ`` the false-alarm
     density ``clutter`` (the scan's stated one, or its sensor's whole scene's as the clutter
     map learned it; ``None``: every cluster) and ``c`` = :data:`GROUP_CONTRAST`. Chained at
     the resolution distance, false alarms spread evenly over a sensor's small scene are one
@@ -1104,12 +1106,20 @@ def _standing_out(
     times)."""
     if clutter is None or not clutter > 0:
         return clusters
-    sizes = [rows.size for rows in clusters]
-    starts = list(itertools.accumulate(sizes[:-1], initial=0))
+    n = np.array([rows.size for rows in clusters], dtype=float)
+    starts = list(itertools.accumulate([rows.size for rows in clusters[:-1]], initial=0))
     z = scan.z.take(np.concatenate(clusters), axis=0)
-    span = np.maximum.reduceat(z, starts, axis=0) - np.minimum.reduceat(z, starts, axis=0)
-    span += 4.0 * sigma
-    expected = GROUP_CONTRAST * clutter * span[:, 0] * span[:, 1]
+    x, y = z[:, 0], z[:, 1]
+    mx = np.add.reduceat(x, starts) / n
+    my = np.add.reduceat(y, starts) / n
+    dx, dy = x - np.repeat(mx, n.astype(np.intp)), y - np.repeat(my, n.astype(np.intp))
+    sxx = np.add.reduceat(dx * dx, starts) / n
+    syy = np.add.reduceat(dy * dy, starts) / n
+    sxy = np.add.reduceat(dx * dy, starts) / n
+    half, root = 0.5 * (sxx + syy), np.hypot(0.5 * (sxx - syy), sxy)
+    w = np.sqrt(12.0 * (half + root)) + 4.0 * sigma
+    h = np.sqrt(12.0 * np.maximum(half - root, 0.0)) + 4.0 * sigma
+    expected = GROUP_CONTRAST * clutter * w * h
     return [rows for rows, e in zip(clusters, expected.tolist(), strict=True) if rows.size >= e]
 
 

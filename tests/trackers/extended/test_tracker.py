@@ -487,17 +487,30 @@ def test_a_radar_alone_in_even_clutter_over_a_small_scene_makes_no_group_of_it()
 
 
 def test_only_clusters_standing_out_from_the_clutter_make_runs():
-    rows = [np.arange(3), np.arange(3, 6)]
+    rows = [np.arange(3), np.arange(3, 7)]
+    # a line of 3 (scatter 200/3 m² along it) and a 200 m x 200 m square of 4 corners (scatter
+    # 1e4 m² on both axes); sigma 2 m grows each side by 8 m
     z = np.array(
-        [[0.0, 0.0], [10.0, 0.0], [20.0, 0.0], [1000.0, 0.0], [1100.0, 100.0], [1200.0, 0.0]]
+        [[0.0, 0.0], [10.0, 0.0], [20.0, 0.0], [1000, 0], [1200, 0], [1000, 200], [1200, 200]],
+        dtype=float,
     )
-    scan = Scan("r", 0.0, z, np.tile(np.eye(2) * 4.0, (6, 1, 1)))  # sigma 2 m: boxes + 8 m
-    # boxes 28 x 8 m and 208 x 108 m; at 1e-4 per m² false alarms would put 0.022 and 2.2
-    # detections in them: the first holds 3 >= 3 x 0.022, the second 3 < 3 x 2.2
+    scan = Scan("r", 0.0, z, np.tile(np.eye(2) * 4.0, (7, 1, 1)))
+    line = (np.sqrt(12.0 * 200.0 / 3.0) + 8.0) * 8.0  # 28.3 m x 8 m
+    square = (np.sqrt(12.0 * 1e4) + 8.0) ** 2  # 354 m x 354 m
+    # at 1e-4 per m² false alarms would put 0.023 and 12.5 detections in them
+    assert 3 * 1e-4 * line <= 3 and 3 * 1e-4 * square > 4
     kept = _standing_out(rows, scan, 1e-4, 2.0)
     assert [r.tolist() for r in kept] == [[0, 1, 2]]
     assert _standing_out(rows, scan, None, 2.0) == rows  # no density known: every cluster
     assert len(_standing_out(rows, scan, 1e-6, 2.0)) == 2
+    # whatever its heading: the line turned by 45° is kept at the density that just keeps it
+    c = math.sqrt(0.5)
+    turned = Scan(
+        "r", 0.0, z[:3] @ np.array([[c, c], [-c, c]]), np.tile(np.eye(2) * 4.0, (3, 1, 1))
+    )
+    edge = 3.0 / (3.0 * line) * 0.999
+    assert len(_standing_out([np.arange(3)], turned, edge, 2.0)) == 1
+    assert len(_standing_out([np.arange(3)], scan, edge, 2.0)) == 1
 
 
 def _walkers(seed: int, T: float = 0.1, duration: float = 25.0):
