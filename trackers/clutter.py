@@ -130,38 +130,24 @@ class _Grid:
     boxes: deque[tuple[float, float, float, float]] = field(
         default_factory=lambda: deque(maxlen=SCENE_SCANS)
     )
-    #: the last :meth:`scene_rate` asked, with its prior (``None`` once a count changed)
-    _scene: tuple[float, float] | None = field(default=None, repr=False)
 
     def exposure(self) -> float:
         """``E = Σ_{k<n} γ^k`` over the ``n`` scans counted."""
         return (1.0 - _GAMMA**self.scans) / (1.0 - _GAMMA)
 
-    def scene_density(self, prior: float) -> float:
-        """``λ₀``, the prior mean of every cell: the whole scene's density :meth:`scene_rate`
-        times :data:`SCENE_MARGIN`, no more than the configured ``prior`` (module docstring);
-        ``prior`` before any count."""
-        lam = self.scene_rate(prior)
-        return prior if lam is None else min(SCENE_MARGIN * lam, prior)
-
     def scene_rate(self, prior: float) -> float | None:
         """``λ̄``, the density of the whole area the sensor's counted detections span (the
         median of :attr:`boxes`, grown by a cell), with the configured ``prior`` weighing
-        :data:`SCENE_PRIOR_SCANS` scans of it; ``None`` before any count. (Kept until the next
-        count: the map and the extended tracker both ask for it each scan.)"""
+        :data:`SCENE_PRIOR_SCANS` scans of it; ``None`` before any count."""
         if not self.boxes:
             return None
-        if self._scene is not None and self._scene[0] == prior:
-            return self._scene[1]
         # the median of the scans' boxes: one far false alarm (or a target's detection) does
         # not make the whole scene that wide
         x0, y0, x1, y1 = np.median(np.array(self.boxes), axis=0).tolist()
         area = (x1 - x0 + self.cell) * (y1 - y0 + self.cell)
-        lam = (prior * area * SCENE_PRIOR_SCANS + self.total) / (
+        return (prior * area * SCENE_PRIOR_SCANS + self.total) / (
             (SCENE_PRIOR_SCANS + self.exposure()) * area
         )
-        self._scene = (prior, lam)
-        return lam
 
     def cells(self, z: np.ndarray) -> np.ndarray:
         ij = np.floor(z / self.cell).astype(np.int64)
@@ -214,7 +200,6 @@ def _coarsen(grid: _Grid) -> None:
     grid.counts = np.bincount(inverse, weights=counts, minlength=merged.size)
     grid.stamps = np.full(merged.size, grid.scans, dtype=np.int64)
     grid.cell *= 2.0
-    grid._scene = None
 
 
 def _unpack_iy(keys: np.ndarray) -> np.ndarray:
@@ -242,20 +227,28 @@ class ClutterMap:
     def density(self, sensor_id: str, z: np.ndarray, prior: float) -> np.ndarray:
         """``λ̂`` (per m²) at each of the positions ``z (n, 2)`` for the sensor's next scan,
         with the configured density ``prior``; ``prior`` everywhere for a sensor not seen."""
+        return self.read(sensor_id, z, prior)[0]
+
+    def read(self, sensor_id: str, z: np.ndarray, prior: float) -> tuple[np.ndarray, float | None]:
+        """:meth:`density` at ``z`` and :meth:`scene_rate`, the scene's found once for both
+        (the cells' prior mean ``λ₀`` is :data:`SCENE_MARGIN` times it, no more than
+        ``prior``: module docstring)."""
         z = np.asarray(z, dtype=float).reshape(-1, 2)
         grid = self._grids.get(sensor_id)
+        rate = None if grid is None else grid.scene_rate(prior)
         if grid is None or grid.scans == 0 or z.shape[0] == 0:
-            return np.full(z.shape[0], prior)
+            return np.full(z.shape[0], prior), rate
         area = grid.cell * grid.cell
-        alpha0 = grid.scene_density(prior) * area * PRIOR_SCANS
+        lam0 = prior if rate is None else min(SCENE_MARGIN * rate, prior)
+        alpha0 = lam0 * area * PRIOR_SCANS
         rows, found = grid.find(grid.cells(z))
         counts = np.zeros(z.shape[0])
         if found.any():
             counts[found] = grid.decayed(rows[found])
         lam = (alpha0 + counts) / ((PRIOR_SCANS + grid.exposure()) * area)
-        return np.maximum(lam, prior * PRIOR_SCANS / (PRIOR_SCANS + MEMORY_SCANS))
+        return np.maximum(lam, prior * PRIOR_SCANS / (PRIOR_SCANS + MEMORY_SCANS)), rate
 
-    def scene_density(self, sensor_id: str, prior: float) -> float | None:
+    def scene_rate(self, sensor_id: str, prior: float) -> float | None:
         """The false-alarm density of ``sensor_id``'s whole scene (per m²): all its counted
         detections over the box they span (:meth:`_Grid.scene_rate`, not capped by the
         configured ``prior`` as the cells' prior is); ``None`` for a sensor with none yet."""
@@ -290,7 +283,6 @@ class ClutterMap:
         self._grids.move_to_end(sensor_id)
         grid.scans += 1
         grid.total *= _GAMMA
-        grid._scene = None
         z = np.asarray(z_clutter, dtype=float).reshape(-1, 2)
         if z.shape[0] == 0:
             return
@@ -373,7 +365,6 @@ class ClutterMap:
             keys, inverse = np.unique(grid.cells(z), return_inverse=True)
             grid.add(keys, np.bincount(inverse.ravel(), weights=weights, minlength=keys.size))
             grid.total += float(weights.sum())
-            grid._scene = None
 
     def forget_held(self) -> None:
         """Drop every held-back detection (the tracks that held them are gone: a state

@@ -344,11 +344,8 @@ class TrackingPipeline:
         tm = self.point.config.track_management
         mapped = scan.clutter_density is None and tm.clutter_map
         if mapped:
-            learned["clutter_map"] = self._clutter.density(
+            learned["clutter_map"], learned["clutter_scene"] = self._clutter.read(
                 scan.sensor_id, scan.z, tm.clutter_density
-            )
-            learned["clutter_scene"] = self._clutter.scene_density(
-                scan.sensor_id, tm.clutter_density
             )
         if learned:
             scan = replace(scan, **learned)

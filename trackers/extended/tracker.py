@@ -1106,13 +1106,14 @@ def _standing_out(
     times)."""
     if clutter is None or not clutter > 0:
         return clusters
-    n = np.array([rows.size for rows in clusters], dtype=float)
-    starts = list(itertools.accumulate([rows.size for rows in clusters[:-1]], initial=0))
+    sizes = [rows.size for rows in clusters]
+    n = np.array(sizes, dtype=float)
+    starts = list(itertools.accumulate(sizes[:-1], initial=0))
     z = scan.z.take(np.concatenate(clusters), axis=0)
     x, y = z[:, 0], z[:, 1]
     mx = np.add.reduceat(x, starts) / n
     my = np.add.reduceat(y, starts) / n
-    dx, dy = x - np.repeat(mx, n.astype(np.intp)), y - np.repeat(my, n.astype(np.intp))
+    dx, dy = x - np.repeat(mx, sizes), y - np.repeat(my, sizes)
     sxx = np.add.reduceat(dx * dx, starts) / n
     syy = np.add.reduceat(dy * dy, starts) / n
     sxy = np.add.reduceat(dx * dy, starts) / n
