@@ -4,9 +4,10 @@
 
 Runs the scenarios of :mod:`clients.scenarios.airspace` (mixed speeds with one radar at
 T = 4 s and T = 1 s; paper 003's formations seen by three unsynchronized radars; a 450 m/s
-target pulling 4 g at T = 2 s) through the tracker with its default configuration and with
-the defaults it had before two-point initiation (single-point starts with a 15 m/s velocity
-prior; the same IMM), on the same detections. Prints, after the first 8 scans,
+target pulling 4 g at T = 2 s; aircraft braking and speeding up on a runway at T = 4 s)
+through the tracker with its default configuration and with the defaults it had before
+two-point initiation (single-point starts with a 15 m/s velocity prior; the same IMM, without
+the turn mode's noise along the velocity), on the same detections. Prints, after the first 8 scans,
 the effective tracking rate (target-scans held by a confirmed track within 150 m that is the
 same track as at the previous scan) overall and per target class, the false confirmed tracks
 per scan, and the median tracker time per scan.
@@ -45,6 +46,7 @@ from clients.scenarios.airspace import (
     formation_scenario,
     manoeuvre_scenario,
     mixed_speed_scenario,
+    runway_scenario,
     simulate_scripted,
     turn_rate_at,
 )
@@ -56,7 +58,13 @@ from trackers.pipeline import TrackingPipeline
 #: The defaults before targets of every speed (issue "Tracks for targets of every speed").
 OLD_DEFAULTS = {
     "initiation": {"method": "single_point", "velocity_std": 15.0, "turn_rate_std": 0.05},
-    "motion": {"q_cv": 0.5, "q_ct": 2.0, "q_turn_rate": 1e-4, "sojourn_times": [30.0, 10.0]},
+    "motion": {
+        "q_cv": 0.5,
+        "q_ct": 2.0,
+        "q_turn_rate": 1e-4,
+        "q_ct_along": 0.0,
+        "sojourn_times": [30.0, 10.0],
+    },
 }
 
 
@@ -144,6 +152,7 @@ def main(argv: list[str] | None = None) -> int:
         "mixed speeds, T = 1 s": lambda s: mixed_speed_scenario(period=1.0, seed=s),
         "paper 003 formations, 3 radars": lambda s: formation_scenario(seed=s),
         "450 m/s, 4 g turn, T = 2 s": lambda s: manoeuvre_scenario(seed=s),
+        "runway: braking 2 m/s², speeding up 2.5 m/s², T = 4 s": lambda s: runway_scenario(seed=s),
     }
     print("effective tracking rate after 8 scans (150 m, same track as the scan before);")
     print("false confirmed tracks per scan (displaced: a target's own track > 150 m off;")

@@ -93,9 +93,11 @@ class MotionConfig:
     ``models`` names the modes, a subset of ``("cv", "ct")`` in that order. ``q_cv`` and
     ``q_ct`` are the white-noise acceleration power spectral densities (m²/s³) of the nearly
     constant velocity and coordinated turn modes; ``q_turn_rate`` the turn-rate noise PSD
-    (rad²/s³) of the coordinated turn mode. Beside a coordinated-turn mode the constant
-    velocity mode resets the turn rate to 0 with std ``cv_turn_rate_std`` (rad/s) at each
-    prediction, so that a finished turn's rate does not live on in it. ``sojourn_times`` are
+    (rad²/s³) of the coordinated turn mode; ``q_ct_along`` a white acceleration noise PSD along
+    each confirmed track's velocity that the coordinated turn mode adds (it is the manoeuvre
+    mode: speeding up and slowing down as well as turning). Beside a coordinated-turn mode the
+    constant velocity mode resets the turn rate to 0 with std ``cv_turn_rate_std`` (rad/s) at
+    each prediction, so that a finished turn's rate does not live on in it. ``sojourn_times`` are
     the mean times (s) spent in each mode; they give the mode transition matrix for any
     interval ``T`` as ``π_jj = exp(−T/τ_j)``, the rest spread evenly over the other modes.
     """
@@ -114,6 +116,13 @@ class MotionConfig:
     )
     q_turn_rate: float = _field(
         3e-5, "turn-rate noise PSD of the coordinated-turn mode, rad²/s³", gt=0, le=1.0
+    )
+    q_ct_along: float = _field(
+        6.0,
+        "acceleration noise PSD along the velocity, added to the coordinated-turn mode's of"
+        " confirmed tracks (a target speeding up or slowing down), m²/s³; 0: none",
+        ge=0,
+        le=1e4,
     )
     cv_turn_rate_std: float = _field(
         0.05,

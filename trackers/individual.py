@@ -56,7 +56,7 @@ from trackers.initiation import (
     pair_candidates,
 )
 from trackers.models.measurement import H_POSITION, MIN_RANGE, range_rate_innovation
-from trackers.models.motion import STATE_DIM, build_models
+from trackers.models.motion import STATE_DIM, along_track_noise_blocks, build_models
 from trackers.peers import (
     HeldDetections,
     PointDirectives,
@@ -460,7 +460,7 @@ class IndividualTracker:
                     interval,
                 ) <= tm.max_coast_time
             tracks, claims, range_rates, established, gated, held = self._update_existing(
-                pred, scan, pd, lam_fa, visible, searching, serial
+                pred, scan, pd, lam_fa, visible, searching, serial, masked >= 1.0
             )
             look = _looks(pred.tracks, visible, masked, t, pd_coast)
             looks = int(np.count_nonzero(look))
@@ -594,6 +594,7 @@ class IndividualTracker:
         visible: np.ndarray | None,
         searching: np.ndarray | None,
         serial: int,
+        free: np.ndarray | None = None,
     ) -> tuple[
         TrackArrays,
         np.ndarray,
@@ -621,8 +622,11 @@ class IndividualTracker:
         ti, dj = pairs.track, pairs.detection
         # The mode-matched update of every gated pair gives its likelihood g_ij for the
         # association gain, and the posterior of the pairs the assignment keeps.
+        P_pairs = P_pred[ti]
+        if ti.size and config.motion.q_ct_along > 0.0 and pred.dt > 0.0:
+            _along_where_calm(pred, scan, ti, dj, P_pairs, lam_fa, free)
         xu, Pu, muu, loglik = imm_update(
-            x_pred[ti], P_pred[ti], c_bar[ti], scan.z[dj], scan.R[dj], H_POSITION
+            x_pred[ti], P_pairs, c_bar[ti], scan.z[dj], scan.R[dj], H_POSITION
         )
         xu, Pu, muu, loglik, rr = _with_range_rates(xu, Pu, muu, loglik, scan, dj, config)
         hit = hit_increment(pd[ti], loglik, _at(lam_fa, dj))
@@ -1085,6 +1089,74 @@ def _import(section: StateSection, config: TrackerConfig, id_prefix: str = "") -
         next_origin=next_origin,
         next_serial=next_serial,
     )
+
+
+def _along_where_calm(
+    pred: _Prediction,
+    scan: Scan,
+    ti: np.ndarray,
+    dj: np.ndarray,
+    P_pairs: np.ndarray,
+    lam_fa: float | np.ndarray,
+    free: np.ndarray | None,
+) -> None:
+    """Add ``motion.q_ct_along`` over the prediction's interval
+    (:func:`~trackers.models.motion.along_track_noise`) to the coordinated-turn mode of the
+    gated pairs' predicted covariances ``P_pairs (K, M, 5, 5)`` (pairs ``ti``, ``dj``), in
+    place, where the track may take a change of speed from its detection: a confirmed track
+    (a tentative one's velocity is still the initiation's guess) with that detection alone in
+    its gate, the gate expecting fewer than :data:`GATE_CLUTTER` false alarms
+    (:func:`_crowded_gates`), outside every peer's resolution cell (``free``; None: no cell).
+    The turn mode is the manoeuvre mode: it holds a target that speeds up or slows down along
+    its path as well as one that turns. Where a detection in the gate may as well be clutter
+    or a neighbour's, a track free to change its speed follows it: in a patch of clutter the
+    map has not learned, false tracks lived on; beside a convoy, a vehicle's track taken by a
+    member's detection slowed to the convoy's speed."""
+    tracks, motion = pred.tracks, pred.config.motion
+    if "ct" not in motion.models:
+        return
+    lone = tracks.confirmed & (np.bincount(ti, minlength=len(tracks)) == 1)
+    if free is not None:
+        lone &= free
+    k = np.flatnonzero(lone[ti])  # the pair of each such track
+    if k.size == 0:
+        return
+    rows, dets = ti[k], dj[k]
+    # λ V < GATE_CLUTTER, V = π γ √det(P_pos + R) with the detection's own R (_crowded_gates)
+    Pc = pred.Pc.reshape(-1, STATE_DIM * STATE_DIM)[rows]
+    R = scan.R.reshape(-1, 4)[dets]
+    a, b, c = Pc[:, 0] + R[:, 0], Pc[:, 1] + R[:, 1], Pc[:, 6] + R[:, 3]
+    volume = np.pi * pred.config.gating.threshold * np.sqrt(np.maximum(a * c - b * b, 0.0))
+    calm = _at(lam_fa, dets) * volume < GATE_CLUTTER
+    if not calm.all():
+        k, rows = k[calm], rows[calm]
+        if k.size == 0:
+            return
+    j = motion.models.index("ct")
+    # Q = [[T³/3, T²/2], [T²/2, T]] ⊗ q u uᵀ on [x, y, vx, vy] (along_track_noise), added
+    # at the 16 entries of each pair's block
+    v = pred.x_pred[:, j, 2:4][rows]
+    uu = along_track_noise_blocks(v, motion.q_ct_along).reshape(-1, 1, 4)
+    dt = pred.dt
+    scale = np.array([dt**3 / 3.0, 0.5 * dt * dt, 0.5 * dt * dt, dt]).reshape(1, 4, 1)
+    M = P_pairs.shape[1]
+    if not P_pairs.flags.c_contiguous:  # reshape would copy, and the sums would be lost
+        raise ValueError("P_pairs: must be C-contiguous")
+    flat = P_pairs.reshape(-1)
+    at = ((k * M + j) * (STATE_DIM * STATE_DIM))[:, None] + _ALONG_ENTRIES
+    flat[at] += (scale * uu).reshape(-1, 16)
+
+
+#: Offsets in a row-major 5 x 5 covariance of the along-track noise's entries, block by
+#: block (position-position, position-velocity, velocity-position, velocity-velocity), each
+#: block's (xx, xy, yx, yy) in the order of :func:`along_track_noise_blocks`.
+_ALONG_ENTRIES = np.array(
+    [
+        r * STATE_DIM + col
+        for r0, c0 in ((0, 0), (0, 2), (2, 0), (2, 2))
+        for r, col in ((r0, c0), (r0, c0 + 1), (r0 + 1, c0), (r0 + 1, c0 + 1))
+    ]
+)
 
 
 def _remoded(tracks: TrackArrays, config: TrackerConfig) -> TrackArrays:

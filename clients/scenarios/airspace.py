@@ -37,6 +37,7 @@ import numpy as np
 from clients.scenarios.multitarget import Area, SimulatedScan, move_targets, ncv_noise
 
 __all__ = [
+    "ACCELERATION_STEP",
     "FORMATION_GROUPS",
     "Manoeuvre",
     "PolarRadar",
@@ -49,6 +50,7 @@ __all__ = [
     "path_ranges",
     "radar_hits",
     "radar_scan",
+    "runway_scenario",
     "simulate_scripted",
 ]
 
@@ -58,11 +60,13 @@ G = 9.80665  # m/s²
 @dataclass(frozen=True)
 class Manoeuvre:
     """A turn at ``turn_rate`` (rad/s, counter-clockwise positive) from ``start`` for
-    ``duration`` seconds."""
+    ``duration`` seconds, the speed changing meanwhile at ``acceleration`` (m/s² along the
+    velocity; a target that brakes stops at 0)."""
 
     start: float
     duration: float
     turn_rate: float
+    acceleration: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -110,6 +114,18 @@ def turn_rate_at(target: ScriptedTarget, t: float) -> float:
     return 0.0
 
 
+def acceleration_at(target: ScriptedTarget, t: float) -> float:
+    """The target's scripted acceleration along its velocity (m/s²) at time ``t``, or 0."""
+    for m in target.manoeuvres:
+        if m.start <= t < m.start + m.duration:
+            return m.acceleration
+    return 0.0
+
+
+#: Step (s) of the integration of a manoeuvre that changes the speed.
+ACCELERATION_STEP = 0.05
+
+
 def _propagate(
     target: ScriptedTarget, state: np.ndarray, t0: float, t1: float, rng: np.random.Generator
 ) -> np.ndarray:
@@ -118,11 +134,33 @@ def _propagate(
         | {c for m in target.manoeuvres for c in (m.start, m.start + m.duration) if t0 < c < t1}
     )
     for a, b in itertools.pairwise(cuts):
-        state = move_targets(state[None, :], np.array([turn_rate_at(target, a)]), b - a)[0]
+        omega = np.array([turn_rate_at(target, a)])
+        accel = acceleration_at(target, a)
+        if accel == 0.0:
+            state = move_targets(state[None, :], omega, b - a)[0]
+            continue
+        # The turn is exact over each step; the speed changes at the step's middle (the
+        # midpoint rule: exact for a constant acceleration in a straight line).
+        steps = max(1, math.ceil((b - a) / ACCELERATION_STEP))
+        h = (b - a) / steps
+        for _ in range(steps):
+            state = _speed_changed(state, 0.5 * h * accel)
+            state = move_targets(state[None, :], omega, h)[0]
+            state = _speed_changed(state, 0.5 * h * accel)
     T = t1 - t0
     if target.q > 0 and T > 0:
         state = state + ncv_noise(rng, target.q, T, 1)[0]
     return state
+
+
+def _speed_changed(state: np.ndarray, dv: float) -> np.ndarray:
+    """``state [x, y, vx, vy]`` with its speed changed by ``dv`` (not below 0), the heading
+    kept."""
+    speed = math.hypot(state[2], state[3])
+    if speed == 0.0:
+        return state
+    k = max(speed + dv, 0.0) / speed
+    return np.array([state[0], state[1], k * state[2], k * state[3]])
 
 
 def _polar_covariance(rho: np.ndarray, theta: np.ndarray, radar: PolarRadar) -> np.ndarray:
@@ -403,3 +441,38 @@ def manoeuvre_scenario(
     )
     radar = PolarRadar("radar-1", period=period)
     return ScriptedScenario((target,), (radar,), duration, seed=seed)
+
+
+def runway_scenario(period: float = 4.0, seed: int = 0) -> ScriptedScenario:
+    """Aircraft that change speed along straight paths, 4-9 km from a radar (range noise
+    50 m, bearing noise 1 mrad, ``period`` seconds, P_D 0.9, 20 false alarms a scan over
+    20 km x 20 km), 116 s: four ``"landing"`` aircraft at 80 m/s that brake at 2 m/s² from
+    t = 40 s to 10 m/s and taxi on, and four ``"take-off"`` aircraft that taxi at 10 m/s and
+    from t = 20 s speed up at 2.5 m/s² to 80 m/s. Places and headings are random."""
+    rng = np.random.default_rng(seed)
+    targets = []
+    for i in range(8):
+        landing = i < 4
+        rho, bearing, heading = (
+            rng.uniform(4e3, 9e3),
+            rng.uniform(0, 2 * math.pi),
+            rng.uniform(0, 2 * math.pi),
+        )
+        speed = 80.0 if landing else 10.0
+        manoeuvre = Manoeuvre(40.0, 35.0, 0.0, -2.0) if landing else Manoeuvre(20.0, 28.0, 0.0, 2.5)
+        targets.append(
+            ScriptedTarget(
+                "landing" if landing else "take-off",
+                (
+                    rho * math.cos(bearing),
+                    rho * math.sin(bearing),
+                    speed * math.cos(heading),
+                    speed * math.sin(heading),
+                ),
+                (manoeuvre,),
+            )
+        )
+    radar = PolarRadar(
+        "radar-1", period=period, clutter_mean=20.0, clutter_area=((-1e4, 1e4), (-1e4, 1e4))
+    )
+    return ScriptedScenario(tuple(targets), (radar,), 116.0, seed=seed)

@@ -11,6 +11,7 @@ from clients.scenarios.airspace import (
     formation_scenario,
     mixed_speed_scenario,
     path_ranges,
+    runway_scenario,
     simulate_scripted,
 )
 
@@ -38,6 +39,35 @@ def test_scripted_turn_changes_heading_by_rate_times_duration():
     vx, vy = scans[-1].truth_states[0, 2:]
     assert math.atan2(vy, vx) == pytest.approx(omega * 30.0, abs=1e-9)
     assert math.hypot(vx, vy) == pytest.approx(250.0)
+
+
+def test_a_scripted_acceleration_changes_the_speed_along_a_straight_path():
+    """10 m/s, then 2.5 m/s² for 28 s: 80 m/s, 10 × 28 + 2.5 × 28² / 2 = 1260 m further on,
+    the heading kept; a target braking harder than its speed allows stops."""
+    radar = PolarRadar("r", (0.0, -50e3), pd=1.0, period=1.0, clutter_mean=0.0)
+    fast = ScriptedTarget("take-off", (0.0, 0.0, 6.0, 8.0), (Manoeuvre(0.0, 28.0, 0.0, 2.5),))
+    stop = ScriptedTarget("landing", (0.0, 0.0, 10.0, 0.0), (Manoeuvre(0.0, 20.0, 0.0, -2.0),))
+    scans = simulate_scripted(ScriptedScenario((fast, stop), (radar,), duration=28.0))
+    x, y, vx, vy = scans[-1].truth_states[0]
+    assert math.hypot(vx, vy) == pytest.approx(80.0)
+    assert math.hypot(x, y) == pytest.approx(1260.0, rel=1e-9)
+    assert math.atan2(vy, vx) == pytest.approx(math.atan2(8.0, 6.0))
+    x, _, vx, vy = scans[-1].truth_states[1]
+    assert (vx, vy) == (0.0, 0.0)
+    assert x == pytest.approx(25.0, abs=0.1)  # stopped after 5 s and 25 m
+
+
+def test_runway_scenario_brakes_and_speeds_up():
+    sc = runway_scenario(seed=0)
+    scans = simulate_scripted(sc)
+    speeds = np.array([np.hypot(*s.truth_states[:, 2:].T) for s in scans])  # (scans, 8)
+    landing = [i for i, c in sc.classes.items() if c == "landing"]
+    take_off = [i for i, c in sc.classes.items() if c == "take-off"]
+    assert len(landing) == len(take_off) == 4
+    np.testing.assert_allclose(speeds[0, landing], 80.0)
+    np.testing.assert_allclose(speeds[-1, landing], 10.0)
+    np.testing.assert_allclose(speeds[0, take_off], 10.0)
+    np.testing.assert_allclose(speeds[-1, take_off], 80.0)
 
 
 def test_mixed_speed_scenario_has_every_class_and_speed():

@@ -838,3 +838,61 @@ def test_the_views_gate_pairs_are_found_once_and_are_the_updates_own(monkeypatch
     assert calls == []
     tr.propose(scan.subset(np.ones(scan.size, dtype=bool)))
     assert len(calls) == 1
+
+
+def _along_rows(monkeypatch, scans, cfg=None) -> list[int]:
+    """How many gated pairs got the turn mode's along-track noise at each scan."""
+    import trackers.individual as individual
+
+    seen: list[int] = []
+    blocks = individual.along_track_noise_blocks
+
+    def counted(v, q):
+        seen.append(len(v))
+        return blocks(v, q)
+
+    monkeypatch.setattr(individual, "along_track_noise_blocks", counted)
+    tr = IndividualTracker(cfg or TrackerConfig())
+    for s in scans:
+        n = len(seen)
+        tr.step(s)
+        if len(seen) == n:
+            seen.append(0)
+    return seen
+
+
+def test_the_along_track_noise_goes_to_confirmed_tracks_alone_in_a_calm_gate(monkeypatch):
+    """A target at 20 m/s: no noise while its track is tentative, then its pair gets it at
+    each scan; with a second detection beside it in the gate, or in dense clutter (a stated
+    density that expects a false alarm in the gate), none; ``q_ct_along`` 0: never."""
+    path = [scan_at(t, [(20.0 * t, 0.0)]) for t in range(8)]
+    counts = _along_rows(monkeypatch, path)
+    assert counts[0] == counts[1] == 0 and counts[-3:] == [1, 1, 1]
+    crowded = path[:5] + [scan_at(t, [(20.0 * t, 0.0), (20.0 * t, 8.0)]) for t in range(5, 8)]
+    assert _along_rows(monkeypatch, crowded)[-3:] == [0, 0, 0]
+    dense = path[:5] + [scan_at(t, [(20.0 * t, 0.0)], lam=1e-3) for t in range(5, 8)]
+    assert _along_rows(monkeypatch, dense)[-3:] == [0, 0, 0]
+    off = TrackerConfig().merged({"motion": {"q_ct_along": 0.0}})
+    assert _along_rows(monkeypatch, path, off) == [0] * 8
+
+
+def test_no_along_track_noise_inside_a_peers_resolution_cell(monkeypatch):
+    """A track whose detection probability a peer lowered (inside an extended track's cell:
+    its detection may be a group member's) does not take a change of speed from it."""
+    import trackers.individual as individual
+    from trackers.peers import PointDirectives
+
+    seen: list[int] = []
+    blocks = individual.along_track_noise_blocks
+    monkeypatch.setattr(
+        individual, "along_track_noise_blocks", lambda v, q: seen.append(len(v)) or blocks(v, q)
+    )
+    tr = IndividualTracker(TrackerConfig())
+    for t in range(6):
+        tr.step(scan_at(t, [(20.0 * t, 0.0)]))
+    assert seen and tr.snapshot()[0].status == "confirmed"
+    seen.clear()
+    tid = tr.snapshot()[0].id
+    for t in range(6, 9):
+        tr.step(scan_at(t, [(20.0 * t, 0.0)]), PointDirectives(pd={tid: 0.5}))
+    assert seen == []

@@ -36,6 +36,8 @@ __all__ = [
     "ConstantVelocity",
     "CoordinatedTurn",
     "MotionModel",
+    "along_track_noise",
+    "along_track_noise_blocks",
     "batch_major",
     "batch_major_cov",
     "build_models",
@@ -144,6 +146,37 @@ def _broadcast_noise(Q: np.ndarray, x: np.ndarray) -> np.ndarray:
 def _add_noise(Ps: np.ndarray, Q: np.ndarray) -> None:
     """``Ps += Q`` in place, state-major Ps and a constant (5, 5) Q."""
     Ps += Q.reshape(STATE_DIM, STATE_DIM, *(1,) * (Ps.ndim - 2))
+
+
+def along_track_noise_blocks(v: np.ndarray, q: float) -> np.ndarray:
+    """``q u uᵀ`` for velocities ``v (..., 2)``, ``u = v / ‖v‖``, flattened as
+    ``(..., 4)`` = (xx, xy, yx, yy): the 2 x 2 block that :func:`along_track_noise` scales.
+    A velocity of 0 has no direction: ``q I / 2``."""
+    v2 = np.einsum("...i,...i->...", v, v)
+    out = (v[..., :, None] * v[..., None, :]) * (q / np.maximum(v2, 1e-300))[..., None, None]
+    out = out.reshape(*v.shape[:-1], 4)
+    if v2.size and v2.min() < 1e-18:
+        out[v2 < 1e-18] = (0.5 * q, 0.0, 0.0, 0.5 * q)
+    return out
+
+
+def along_track_noise(x: np.ndarray, q: float, dt: float) -> np.ndarray:
+    """White acceleration noise of PSD ``q`` (m²/s³) along each state's velocity over ``dt``:
+
+        Q = [[T³/3, T²/2], [T²/2, T]] ⊗ q u uᵀ,    u = (vx, vy) / ‖(vx, vy)‖
+
+    on ``[x, y, vx, vy]`` (ω untouched), for states ``x (..., 5)``: a target speeding up or
+    slowing down along its path. A state at rest has no direction: its ``q`` is split evenly
+    over both axes (``u uᵀ = I / 2``). Returns ``Q (..., 5, 5)``."""
+    x = np.asarray(x, dtype=float)
+    q, dt = _check_psd("q", q), _check_dt(dt)
+    uu = along_track_noise_blocks(x[..., 2:4], q).reshape(*x.shape[:-1], 2, 2)
+    t2 = dt * dt
+    Q = np.zeros((*x.shape[:-1], STATE_DIM, STATE_DIM))
+    Q[..., 0:2, 0:2] = (t2 * dt / 3.0) * uu
+    Q[..., 0:2, 2:4] = Q[..., 2:4, 0:2] = (0.5 * t2) * uu
+    Q[..., 2:4, 2:4] = dt * uu
+    return Q
 
 
 class MotionModel(Protocol):

@@ -12,6 +12,8 @@ from trackers.models import motion
 from trackers.models.motion import (
     ConstantVelocity,
     CoordinatedTurn,
+    along_track_noise,
+    along_track_noise_blocks,
     batch_major,
     batch_major_cov,
     build_models,
@@ -403,3 +405,24 @@ def test_results_do_not_depend_on_block_size(
         xk, Pk = model.predict(x[k], P[k], 0.9)
         np.testing.assert_allclose(xk, x_one[k], rtol=1e-15)
         np.testing.assert_allclose(Pk, P_one[k], rtol=1e-14)
+
+
+def test_along_track_noise_lies_along_the_velocity() -> None:
+    """``Q = [[T³/3, T²/2], [T²/2, T]] ⊗ q u uᵀ``: for v = (3, 4), q = 2, T = 2, u uᵀ =
+    [[9, 12], [12, 16]] / 25; nothing across the velocity, nothing on ω; a state at rest
+    spreads q evenly over both axes."""
+    Q = along_track_noise(np.array([[5.0, 6.0, 3.0, 4.0, 0.1], [0, 0, 0, 0, 0]]), 2.0, 2.0)
+    uu = np.array([[9.0, 12.0], [12.0, 16.0]]) / 25.0
+    np.testing.assert_allclose(Q[0, 0:2, 0:2], 2.0 * 8.0 / 3.0 * uu)
+    np.testing.assert_allclose(Q[0, 0:2, 2:4], 2.0 * 2.0 * uu)
+    np.testing.assert_allclose(Q[0, 2:4, 0:2], 2.0 * 2.0 * uu)
+    np.testing.assert_allclose(Q[0, 2:4, 2:4], 2.0 * 2.0 * uu)
+    assert not Q[0, 4].any() and not Q[0, :, 4].any()
+    across = np.array([-4.0, 3.0]) / 5.0
+    assert across @ Q[0, 2:4, 2:4] @ across == pytest.approx(0.0, abs=1e-12)
+    np.testing.assert_allclose(Q[1, 2:4, 2:4], 2.0 * 2.0 * 0.5 * np.eye(2))
+    np.testing.assert_allclose(
+        along_track_noise_blocks(np.array([3.0, 4.0]), 2.0), 2.0 * uu.reshape(4)
+    )
+    with pytest.raises(ValueError):
+        along_track_noise(np.zeros(5), -1.0, 1.0)
