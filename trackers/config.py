@@ -94,8 +94,10 @@ class MotionConfig:
     ``q_ct`` are the white-noise acceleration power spectral densities (m²/s³) of the nearly
     constant velocity and coordinated turn modes; ``q_turn_rate`` the turn-rate noise PSD
     (rad²/s³) of the coordinated turn mode; ``q_ct_along`` a white acceleration noise PSD along
-    each confirmed track's velocity that the coordinated turn mode adds (it is the manoeuvre
-    mode: speeding up and slowing down as well as turning). Beside a coordinated-turn mode the
+    the velocity that the coordinated turn mode adds (it is the manoeuvre mode: speeding up and
+    slowing down as well as turning) when a confirmed track is updated with a detection alone in
+    its gate, in sparse clutter, outside every peer's resolution cell (README, *Targets that
+    speed up or slow down*). Beside a coordinated-turn mode the
     constant velocity mode resets the turn rate to 0 with std ``cv_turn_rate_std`` (rad/s) at
     each prediction, so that a finished turn's rate does not live on in it. ``sojourn_times`` are
     the mean times (s) spent in each mode; they give the mode transition matrix for any
@@ -119,8 +121,9 @@ class MotionConfig:
     )
     q_ct_along: float = _field(
         6.0,
-        "acceleration noise PSD along the velocity, added to the coordinated-turn mode's of"
-        " confirmed tracks (a target speeding up or slowing down), m²/s³; 0: none",
+        "acceleration noise PSD along the velocity, added to the coordinated-turn mode's when"
+        " a confirmed track takes a detection alone in its gate, in sparse clutter, outside"
+        " every resolution cell (a target speeding up or slowing down), m²/s³; 0: none",
         ge=0,
         le=1e4,
     )

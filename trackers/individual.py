@@ -1100,7 +1100,7 @@ def _along_where_calm(
     lam_fa: float | np.ndarray,
     free: np.ndarray | None,
 ) -> None:
-    """Add ``motion.q_ct_along`` over the prediction's interval
+    """Add ``motion.q_ct_along`` over the time since the track's last detection
     (:func:`~trackers.models.motion.along_track_noise`) to the coordinated-turn mode of the
     gated pairs' predicted covariances ``P_pairs (K, M, 5, 5)`` (pairs ``ti``, ``dj``), in
     place, where the track may take a change of speed from its detection: a confirmed track
@@ -1133,12 +1133,14 @@ def _along_where_calm(
         if k.size == 0:
             return
     j = motion.models.index("ct")
-    # Q = [[T³/3, T²/2], [T²/2, T]] ⊗ q u uᵀ on [x, y, vx, vy] (along_track_noise), added
-    # at the 16 entries of each pair's block
+    # Q = [[τ³/3, τ²/2], [τ²/2, τ]] ⊗ q u uᵀ on [x, y, vx, vy] (along_track_noise), added
+    # at the 16 entries of each pair's block; τ the time since the track's last detection
+    # (a track that coasted gets the noise of its whole coast, not of the last interval)
     v = pred.x_pred[:, j, 2:4][rows]
     uu = along_track_noise_blocks(v, motion.q_ct_along).reshape(-1, 1, 4)
-    dt = pred.dt
-    scale = np.array([dt**3 / 3.0, 0.5 * dt * dt, 0.5 * dt * dt, dt]).reshape(1, 4, 1)
+    tau = np.maximum(pred.time - tracks.updated[rows], 0.0)
+    t2 = tau * tau
+    scale = np.stack([t2 * tau / 3.0, 0.5 * t2, 0.5 * t2, tau], axis=1)[:, :, None]
     M = P_pairs.shape[1]
     if not P_pairs.flags.c_contiguous:  # reshape would copy, and the sums would be lost
         raise ValueError("P_pairs: must be C-contiguous")

@@ -61,7 +61,8 @@ G = 9.80665  # m/s²
 class Manoeuvre:
     """A turn at ``turn_rate`` (rad/s, counter-clockwise positive) from ``start`` for
     ``duration`` seconds, the speed changing meanwhile at ``acceleration`` (m/s² along the
-    velocity; a target that brakes stops at 0)."""
+    velocity; a target that brakes stops at 0, and one at rest has no heading to speed up
+    along: it stays)."""
 
     start: float
     duration: float
@@ -444,11 +445,12 @@ def manoeuvre_scenario(
 
 
 def runway_scenario(period: float = 4.0, seed: int = 0) -> ScriptedScenario:
-    """Aircraft that change speed along straight paths, 4-9 km from a radar (range noise
-    50 m, bearing noise 1 mrad, ``period`` seconds, P_D 0.9, 20 false alarms a scan over
+    """Aircraft that change speed along straight paths starting 4-9 km from a radar (range
+    noise 50 m, bearing noise 1 mrad, ``period`` seconds, P_D 0.9, 20 false alarms a scan over
     20 km x 20 km), 116 s: four ``"landing"`` aircraft at 80 m/s that brake at 2 m/s² from
     t = 40 s to 10 m/s and taxi on, and four ``"take-off"`` aircraft that taxi at 10 m/s and
-    from t = 20 s speed up at 2.5 m/s² to 80 m/s. Places and headings are random."""
+    from t = 20 s speed up at 2.5 m/s² to 80 m/s. Starting places and headings are random, so
+    a path may pass near the radar or leave the clutter's square (up to 16 km out)."""
     rng = np.random.default_rng(seed)
     targets = []
     for i in range(8):

@@ -867,7 +867,7 @@ def test_the_along_track_noise_goes_to_confirmed_tracks_alone_in_a_calm_gate(mon
     density that expects a false alarm in the gate), none; ``q_ct_along`` 0: never."""
     path = [scan_at(t, [(20.0 * t, 0.0)]) for t in range(8)]
     counts = _along_rows(monkeypatch, path)
-    assert counts[0] == counts[1] == 0 and counts[-3:] == [1, 1, 1]
+    assert counts == [0, 0, 0, 0, 1, 1, 1, 1]  # tentative until its 4th detection
     crowded = path[:5] + [scan_at(t, [(20.0 * t, 0.0), (20.0 * t, 8.0)]) for t in range(5, 8)]
     assert _along_rows(monkeypatch, crowded)[-3:] == [0, 0, 0]
     dense = path[:5] + [scan_at(t, [(20.0 * t, 0.0)], lam=1e-3) for t in range(5, 8)]
@@ -896,3 +896,26 @@ def test_no_along_track_noise_inside_a_peers_resolution_cell(monkeypatch):
     for t in range(6, 9):
         tr.step(scan_at(t, [(20.0 * t, 0.0)]), PointDirectives(pd={tid: 0.5}))
     assert seen == []
+
+
+def test_the_along_track_noise_is_the_noise_of_the_time_since_the_last_detection():
+    """The pair's turn-mode covariance gets exactly ``along_track_noise`` over τ, the time
+    since the track's last detection (2 s after a missed scan), and its other mode nothing."""
+    from trackers.individual import _along_where_calm
+    from trackers.models.motion import along_track_noise
+
+    tr = IndividualTracker(TrackerConfig())
+    for t in range(6):
+        tr.step(scan_at(t, [(20.0 * t, 10.0 * t)]))
+    tr.step(scan_at(6, []))  # missed
+    scan = scan_at(7, [(140.0, 70.0)])
+    pred = tr._predict(7.0)
+    pairs = pred.gated(scan, pred.config.gating.threshold)
+    ti, dj = pairs.track, pairs.detection
+    assert ti.size == 1
+    P = pred.P_pred[ti].copy()
+    _along_where_calm(pred, scan, ti, dj, P, pred.config.track_management.clutter_density, None)
+    j = pred.config.motion.models.index("ct")
+    Q = along_track_noise(pred.x_pred[ti[0], j], pred.config.motion.q_ct_along, 2.0)
+    np.testing.assert_allclose(P[0, j] - pred.P_pred[ti[0], j], Q, rtol=1e-12, atol=1e-12)
+    np.testing.assert_array_equal(P[0, 1 - j], pred.P_pred[ti[0], 1 - j])

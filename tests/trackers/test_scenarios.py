@@ -146,7 +146,7 @@ def test_a_4g_turn_at_450_m_s_is_held_at_a_2_s_revisit():
 def test_aircraft_that_brake_or_speed_up_keep_their_tracks_with_defaults():
     """Landings braking at 2 m/s² from 80 to 10 m/s and take-offs speeding up at 2.5 m/s² from
     10 to 80 m/s, T = 4 s, 50 m range noise: the turn mode's noise along the velocity
-    (``motion.q_ct_along``) holds them (3 seeds: 0.93 held, 0.17 false tracks a scan;
+    (``motion.q_ct_along``) holds them (3 seeds: 0.94 held, 0.12 false tracks a scan;
     without it 0.81 and 0.68, a braking aircraft's track running on ahead of it)."""
     from clients.scenarios.airspace import runway_scenario
 
