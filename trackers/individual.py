@@ -1115,19 +1115,21 @@ def _along_where_calm(
     tracks, motion = pred.tracks, pred.config.motion
     if "ct" not in motion.models:
         return
-    lone = tracks.confirmed & (np.bincount(ti, minlength=len(tracks)) == 1)
+    lone = np.bincount(ti, minlength=len(tracks)) == 1
+    lone &= tracks.confirmed
     if free is not None:
         lone &= free
     k = np.flatnonzero(lone[ti])  # the pair of each such track
     if k.size == 0:
         return
     rows, dets = ti[k], dj[k]
-    # λ V < GATE_CLUTTER, V = π γ √det(P_pos + R) with the detection's own R (_crowded_gates)
-    Pc = pred.Pc.reshape(-1, STATE_DIM * STATE_DIM)[rows]
-    R = scan.R.reshape(-1, 4)[dets]
-    a, b, c = Pc[:, 0] + R[:, 0], Pc[:, 1] + R[:, 1], Pc[:, 6] + R[:, 3]
-    volume = np.pi * pred.config.gating.threshold * np.sqrt(np.maximum(a * c - b * b, 0.0))
-    calm = _at(lam_fa, dets) * volume < GATE_CLUTTER
+    # λ V < GATE_CLUTTER, V = π γ √det(P_pos + R) with the detection's own R (_crowded_gates),
+    # squared: λ² det < (GATE_CLUTTER / (π γ))²
+    S = pred.Pc.reshape(-1, STATE_DIM * STATE_DIM)[rows[:, None], _POSITION_ENTRIES]
+    S += scan.R.reshape(-1, 4)[dets[:, None], _R_ENTRIES]
+    lam = _at(lam_fa, dets)
+    bound = GATE_CLUTTER / (np.pi * pred.config.gating.threshold)
+    calm = lam * lam * (S[:, 0] * S[:, 2] - S[:, 1] * S[:, 1]) < bound * bound
     if not calm.all():
         k, rows = k[calm], rows[calm]
         if k.size == 0:
@@ -1136,18 +1138,23 @@ def _along_where_calm(
     # Q = [[τ³/3, τ²/2], [τ²/2, τ]] ⊗ q u uᵀ on [x, y, vx, vy] (along_track_noise), added
     # at the 16 entries of each pair's block; τ the time since the track's last detection
     # (a track that coasted gets the noise of its whole coast, not of the last interval)
-    v = pred.x_pred[:, j, 2:4][rows]
-    uu = along_track_noise_blocks(v, motion.q_ct_along).reshape(-1, 1, 4)
-    tau = np.maximum(pred.time - tracks.updated[rows], 0.0)
-    t2 = tau * tau
-    scale = np.stack([t2 * tau / 3.0, 0.5 * t2, 0.5 * t2, tau], axis=1)[:, :, None]
+    uu = along_track_noise_blocks(pred.x_pred[rows, j, 2:4], motion.q_ct_along)
+    tau = pred.time - tracks.updated[rows]
+    scale = tau[:, None] ** _ALONG_POWERS * _ALONG_FACTORS  # (K, 4): the blocks' factors
     M = P_pairs.shape[1]
     if not P_pairs.flags.c_contiguous:  # reshape would copy, and the sums would be lost
         raise ValueError("P_pairs: must be C-contiguous")
     flat = P_pairs.reshape(-1)
-    at = ((k * M + j) * (STATE_DIM * STATE_DIM))[:, None] + _ALONG_ENTRIES
-    flat[at] += (scale * uu).reshape(-1, 16)
+    at = (k * (M * STATE_DIM * STATE_DIM) + j * STATE_DIM * STATE_DIM)[:, None] + _ALONG_ENTRIES
+    flat[at] += (scale[:, :, None] * uu[:, None, :]).reshape(-1, 16)
 
+
+#: The entries (0,0), (0,1), (1,1) of a row-major 5 x 5 and of a 2 x 2 covariance.
+_POSITION_ENTRIES = np.array([0, 1, STATE_DIM + 1])
+_R_ENTRIES = np.array([0, 1, 3])
+#: τ's powers and factors of the along-track noise's blocks: τ³/3, τ²/2, τ²/2, τ.
+_ALONG_POWERS = np.array([3.0, 2.0, 2.0, 1.0])
+_ALONG_FACTORS = np.array([1.0 / 3.0, 0.5, 0.5, 1.0])
 
 #: Offsets in a row-major 5 x 5 covariance of the along-track noise's entries, block by
 #: block (position-position, position-velocity, velocity-position, velocity-velocity), each
