@@ -230,9 +230,11 @@ class ClutterMap:
         return self.read(sensor_id, z, prior)[0]
 
     def read(self, sensor_id: str, z: np.ndarray, prior: float) -> tuple[np.ndarray, float | None]:
-        """:meth:`density` at ``z`` and :meth:`scene_rate`, the scene's found once for both
-        (the cells' prior mean ``λ₀`` is :data:`SCENE_MARGIN` times it, no more than
-        ``prior``: module docstring)."""
+        """:meth:`density` at ``z``, and the false-alarm density of ``sensor_id``'s whole
+        scene (per m²): all its counted detections over the box they span
+        (:meth:`_Grid.scene_rate`; ``None`` for a sensor with none yet), not capped by the
+        configured ``prior`` as the cells' prior mean ``λ₀`` is (:data:`SCENE_MARGIN` times
+        it, no more than ``prior``: module docstring). The scene's is found once for both."""
         z = np.asarray(z, dtype=float).reshape(-1, 2)
         grid = self._grids.get(sensor_id)
         rate = None if grid is None else grid.scene_rate(prior)
@@ -247,13 +249,6 @@ class ClutterMap:
             counts[found] = grid.decayed(rows[found])
         lam = (alpha0 + counts) / ((PRIOR_SCANS + grid.exposure()) * area)
         return np.maximum(lam, prior * PRIOR_SCANS / (PRIOR_SCANS + MEMORY_SCANS)), rate
-
-    def scene_rate(self, sensor_id: str, prior: float) -> float | None:
-        """The false-alarm density of ``sensor_id``'s whole scene (per m²): all its counted
-        detections over the box they span (:meth:`_Grid.scene_rate`, not capped by the
-        configured ``prior`` as the cells' prior is); ``None`` for a sensor with none yet."""
-        grid = self._grids.get(sensor_id)
-        return None if grid is None else grid.scene_rate(prior)
 
     def learn(self, sensor_id: str, z_clutter: np.ndarray, R: np.ndarray) -> None:
         """Record one processed scan of ``sensor_id``: ``z_clutter`` the detections taken for

@@ -56,7 +56,7 @@ from trackers.initiation import (
     pair_candidates,
 )
 from trackers.models.measurement import H_POSITION, MIN_RANGE, range_rate_innovation
-from trackers.models.motion import STATE_DIM, along_track_noise_blocks, build_models
+from trackers.models.motion import STATE_DIM, along_track_noise, build_models
 from trackers.peers import (
     HeldDetections,
     PointDirectives,
@@ -1123,49 +1123,19 @@ def _along_where_calm(
     if k.size == 0:
         return
     rows, dets = ti[k], dj[k]
-    # λ V < GATE_CLUTTER, V = π γ √det(P_pos + R) with the detection's own R (_crowded_gates),
-    # squared: λ² det < (GATE_CLUTTER / (π γ))²
-    S = pred.Pc.reshape(-1, STATE_DIM * STATE_DIM)[rows[:, None], _POSITION_ENTRIES]
-    S += scan.R.reshape(-1, 4)[dets[:, None], _R_ENTRIES]
-    lam = _at(lam_fa, dets)
-    bound = GATE_CLUTTER / (np.pi * pred.config.gating.threshold)
-    calm = lam * lam * (S[:, 0] * S[:, 2] - S[:, 1] * S[:, 1]) < bound * bound
+    # the gate of each with the detection's own R (_crowded_gates has the scan's median R)
+    S = pred.Pc[rows, :2, :2] + scan.R[dets]
+    det = S[:, 0, 0] * S[:, 1, 1] - S[:, 0, 1] ** 2
+    calm = ~_expects_clutter(_at(lam_fa, dets), det, pred.config.gating.threshold)
     if not calm.all():
         k, rows = k[calm], rows[calm]
         if k.size == 0:
             return
     j = motion.models.index("ct")
-    # Q = [[τ³/3, τ²/2], [τ²/2, τ]] ⊗ q u uᵀ on [x, y, vx, vy] (along_track_noise), added
-    # at the 16 entries of each pair's block; τ the time since the track's last detection
-    # (a track that coasted gets the noise of its whole coast, not of the last interval)
-    uu = along_track_noise_blocks(pred.x_pred[rows, j, 2:4], motion.q_ct_along)
+    # over τ, the time since the track's last detection: a track that coasted gets the
+    # noise of its whole coast, not of the last interval
     tau = pred.time - tracks.updated[rows]
-    scale = tau[:, None] ** _ALONG_POWERS * _ALONG_FACTORS  # (K, 4): the blocks' factors
-    M = P_pairs.shape[1]
-    if not P_pairs.flags.c_contiguous:  # reshape would copy, and the sums would be lost
-        raise ValueError("P_pairs: must be C-contiguous")
-    flat = P_pairs.reshape(-1)
-    at = (k * (M * STATE_DIM * STATE_DIM) + j * STATE_DIM * STATE_DIM)[:, None] + _ALONG_ENTRIES
-    flat[at] += (scale[:, :, None] * uu[:, None, :]).reshape(-1, 16)
-
-
-#: The entries (0,0), (0,1), (1,1) of a row-major 5 x 5 and of a 2 x 2 covariance.
-_POSITION_ENTRIES = np.array([0, 1, STATE_DIM + 1])
-_R_ENTRIES = np.array([0, 1, 3])
-#: τ's powers and factors of the along-track noise's blocks: τ³/3, τ²/2, τ²/2, τ.
-_ALONG_POWERS = np.array([3.0, 2.0, 2.0, 1.0])
-_ALONG_FACTORS = np.array([1.0 / 3.0, 0.5, 0.5, 1.0])
-
-#: Offsets in a row-major 5 x 5 covariance of the along-track noise's entries, block by
-#: block (position-position, position-velocity, velocity-position, velocity-velocity), each
-#: block's (xx, xy, yx, yy) in the order of :func:`along_track_noise_blocks`.
-_ALONG_ENTRIES = np.array(
-    [
-        r * STATE_DIM + col
-        for r0, c0 in ((0, 0), (0, 2), (2, 0), (2, 2))
-        for r, col in ((r0, c0), (r0, c0 + 1), (r0 + 1, c0), (r0 + 1, c0 + 1))
-    ]
-)
+    P_pairs[k, j] += along_track_noise(pred.x_pred[rows, j], motion.q_ct_along, tau)
 
 
 def _remoded(tracks: TrackArrays, config: TrackerConfig) -> TrackArrays:
@@ -1709,7 +1679,12 @@ def _crowded_gates(
     scene = float(np.median(lam_fa)) if isinstance(lam_fa, np.ndarray) else float(lam_fa)
     lam = np.where(np.isnan(lam_gated), scene, lam_gated)
     S = Pc[:, :2, :2] + np.median(scan.R, axis=0)
-    det = S[:, 0, 0] * S[:, 1, 1] - S[:, 0, 1] ** 2
+    return _expects_clutter(lam, S[:, 0, 0] * S[:, 1, 1] - S[:, 0, 1] ** 2, gamma)
+
+
+def _expects_clutter(lam: float | np.ndarray, det: np.ndarray, gamma: float) -> np.ndarray:
+    """Whether gates ``mᵀ S⁻¹ m ≤ γ`` of ``det S`` expect at least :data:`GATE_CLUTTER`
+    false alarms at densities ``lam``: ``λ π γ √det S ≥ GATE_CLUTTER``."""
     return lam * np.pi * gamma * np.sqrt(np.maximum(det, 0.0)) >= GATE_CLUTTER
 
 

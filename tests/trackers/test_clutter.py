@@ -230,15 +230,19 @@ def test_the_scene_density_is_not_capped_by_the_configured_one() -> None:
     from trackers.clutter import SCENE_PRIOR_SCANS
 
     m = ClutterMap()
-    assert m.scene_rate("r", PRIOR) is None  # a sensor not heard
+
+    def scene_rate(sensor: str, prior: float) -> float | None:
+        return m.read(sensor, np.zeros((0, 2)), prior)[1]
+
+    assert scene_rate("r", PRIOR) is None  # a sensor not heard
     z = np.array([[0.0, 0.0], [400.0, 0.0], [0.0, 400.0], [400.0, 400.0], [200.0, 200.0]])
     m.learn("r", z, _R(5))
     side = 400.0 + m.cell_side("r")  # the box of the counts, grown by a cell (200 m)
     area = side * side
     expected = (PRIOR * area * SCENE_PRIOR_SCANS + 5.0) / ((SCENE_PRIOR_SCANS + 1.0) * area)
-    assert m.scene_rate("r", PRIOR) == pytest.approx(expected)
+    assert scene_rate("r", PRIOR) == pytest.approx(expected)
     assert expected > 10 * PRIOR  # 5 false alarms over 600 m x 600 m: 1.4e-5 per m²
-    assert m.scene_rate("other", PRIOR) is None
+    assert scene_rate("other", PRIOR) is None
 
 
 def _scans_to_confirm(seed: int, clutter_map: bool = True) -> int:

@@ -845,13 +845,13 @@ def _along_rows(monkeypatch, scans, cfg=None) -> list[int]:
     import trackers.individual as individual
 
     seen: list[int] = []
-    blocks = individual.along_track_noise_blocks
+    noise = individual.along_track_noise
 
-    def counted(v, q):
-        seen.append(len(v))
-        return blocks(v, q)
+    def counted(x, q, dt):
+        seen.append(len(x))
+        return noise(x, q, dt)
 
-    monkeypatch.setattr(individual, "along_track_noise_blocks", counted)
+    monkeypatch.setattr(individual, "along_track_noise", counted)
     tr = IndividualTracker(cfg or TrackerConfig())
     for s in scans:
         n = len(seen)
@@ -883,9 +883,9 @@ def test_no_along_track_noise_inside_a_peers_resolution_cell(monkeypatch):
     from trackers.peers import PointDirectives
 
     seen: list[int] = []
-    blocks = individual.along_track_noise_blocks
+    noise = individual.along_track_noise
     monkeypatch.setattr(
-        individual, "along_track_noise_blocks", lambda v, q: seen.append(len(v)) or blocks(v, q)
+        individual, "along_track_noise", lambda x, q, dt: seen.append(len(x)) or noise(x, q, dt)
     )
     tr = IndividualTracker(TrackerConfig())
     for t in range(6):

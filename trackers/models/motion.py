@@ -160,22 +160,27 @@ def along_track_noise_blocks(v: np.ndarray, q: float) -> np.ndarray:
     return out
 
 
-def along_track_noise(x: np.ndarray, q: float, dt: float) -> np.ndarray:
+def along_track_noise(x: np.ndarray, q: float, dt: float | np.ndarray) -> np.ndarray:
     """White acceleration noise of PSD ``q`` (m²/s³) along each state's velocity over ``dt``:
 
         Q = [[T³/3, T²/2], [T²/2, T]] ⊗ q u uᵀ,    u = (vx, vy) / ‖(vx, vy)‖
 
-    on ``[x, y, vx, vy]`` (ω untouched), for states ``x (..., 5)``: a target speeding up or
-    slowing down along its path. A state at rest has no direction: its ``q`` is split evenly
-    over both axes (``u uᵀ = I / 2``). Returns ``Q (..., 5, 5)``."""
+    on ``[x, y, vx, vy]`` (ω untouched), for states ``x (..., 5)`` and one ``dt`` or one per
+    state (``(...)``): a target speeding up or slowing down along its path. A state at rest
+    has no direction: its ``q`` is split evenly over both axes (``u uᵀ = I / 2``). Returns
+    ``Q (..., 5, 5)``."""
     x = np.asarray(x, dtype=float)
-    q, dt = _check_psd("q", q), _check_dt(dt)
+    q = _check_psd("q", q)
+    T = np.asarray(dt, dtype=float)
+    if not (np.isfinite(T).all() and (T >= 0.0).all()):
+        raise ValueError(f"dt: must be finite numbers >= 0, got {dt!r}")
+    T = np.broadcast_to(T, x.shape[:-1])[..., None, None]
     uu = along_track_noise_blocks(x[..., 2:4], q).reshape(*x.shape[:-1], 2, 2)
-    t2 = dt * dt
+    t2 = T * T
     Q = np.zeros((*x.shape[:-1], STATE_DIM, STATE_DIM))
-    Q[..., 0:2, 0:2] = (t2 * dt / 3.0) * uu
+    Q[..., 0:2, 0:2] = (t2 * T / 3.0) * uu
     Q[..., 0:2, 2:4] = Q[..., 2:4, 0:2] = (0.5 * t2) * uu
-    Q[..., 2:4, 2:4] = dt * uu
+    Q[..., 2:4, 2:4] = T * uu
     return Q
 
 
