@@ -293,6 +293,14 @@ class GatingConfig:
         gt=0,
         le=10.0,
     )
+    manoeuvre_speed_change: float = _field(
+        3.0,
+        "and as far as a change of speed at this acceleration reaches along its velocity (a"
+        " target setting off, speeding up or braking), where that search expects fewer than"
+        " 0.1 false alarms, m/s² (0: only the turn's fifth)",
+        ge=0,
+        le=1e4,
+    )
 
     def __post_init__(self) -> None:
         _check_bounds(self, "gating")

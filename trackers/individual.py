@@ -1405,11 +1405,14 @@ def _manoeuvre_found(
         lost &= seen
     lost[assigned] = False
     lost = np.flatnonzero(lost)
-    a_max, omega_max = config.gating.manoeuvre_acceleration, config.gating.manoeuvre_turn_rate
+    gating = config.gating
+    a_max, omega_max = gating.manoeuvre_acceleration, gating.manoeuvre_turn_rate
     tau = scan.time - tracks.updated[lost]
     # Most lost tracks' manoeuvres stay within their gates: the search's arrays are taken
     # for the others only.
-    wide = reaches_beyond(pred.xc[lost], pred.Pc[lost], tau, a_max, omega_max)
+    wide = reaches_beyond(
+        pred.xc[lost], pred.Pc[lost], tau, a_max, omega_max, gating.manoeuvre_speed_change
+    )
     lost, tau = lost[wide], tau[wide]
     free = np.ones(scan.size, dtype=bool)
     free[gated] = False
@@ -1432,6 +1435,8 @@ def _manoeuvre_found(
         straight_sojourn=config.motion.sojourn_times[0],
         gamma=config.gating.threshold,
         max_speed=config.initiation.max_speed,
+        a_speed=gating.manoeuvre_speed_change,
+        quiet=GATE_CLUTTER,
     )
     if found is None:
         return None

@@ -38,12 +38,14 @@ from clients.scenarios.multitarget import Area, SimulatedScan, move_targets, ncv
 
 __all__ = [
     "ACCELERATION_STEP",
+    "AT_REST_SPEED",
     "FORMATION_GROUPS",
     "Manoeuvre",
     "PolarRadar",
     "RadarHits",
     "ScriptedScenario",
     "ScriptedTarget",
+    "apron_scenario",
     "formation_scenario",
     "manoeuvre_scenario",
     "mixed_speed_scenario",
@@ -462,19 +464,50 @@ def runway_scenario(period: float = 4.0, seed: int = 0) -> ScriptedScenario:
         )
         speed = 80.0 if landing else 10.0
         manoeuvre = Manoeuvre(40.0, 35.0, 0.0, -2.0) if landing else Manoeuvre(20.0, 28.0, 0.0, 2.5)
-        targets.append(
-            ScriptedTarget(
-                "landing" if landing else "take-off",
-                (
-                    rho * math.cos(bearing),
-                    rho * math.sin(bearing),
-                    speed * math.cos(heading),
-                    speed * math.sin(heading),
-                ),
-                (manoeuvre,),
-            )
-        )
-    radar = PolarRadar(
+        name = "landing" if landing else "take-off"
+        targets.append(_speed_changer(name, rho, bearing, speed, heading, manoeuvre))
+    return ScriptedScenario(tuple(targets), (_airfield_radar(period),), 116.0, seed=seed)
+
+
+def _speed_changer(
+    name: str, rho: float, bearing: float, speed: float, heading: float, manoeuvre: Manoeuvre
+) -> ScriptedTarget:
+    """A target at range ``rho`` and ``bearing`` from the origin, at ``speed`` along
+    ``heading``, with one ``manoeuvre``."""
+    position = (rho * math.cos(bearing), rho * math.sin(bearing))
+    velocity = (speed * math.cos(heading), speed * math.sin(heading))
+    return ScriptedTarget(name, (*position, *velocity), (manoeuvre,))
+
+
+def _airfield_radar(period: float) -> PolarRadar:
+    """A radar at the origin, 20 false alarms a scan over 20 km x 20 km."""
+    return PolarRadar(
         "radar-1", period=period, clutter_mean=20.0, clutter_area=((-1e4, 1e4), (-1e4, 1e4))
     )
-    return ScriptedScenario(tuple(targets), (radar,), 116.0, seed=seed)
+
+
+#: The speed (m/s) of a scripted target "at rest": 1 mm/s, which gives it the heading it
+#: sets off along (it moves 4 cm in 40 s).
+AT_REST_SPEED = 1e-3
+
+
+def apron_scenario(period: float = 4.0, seed: int = 0) -> ScriptedScenario:
+    """Targets at rest 1-3 km from a radar (range noise 50 m, bearing noise 1 mrad, so
+    1-3 m across the beam; ``period`` seconds, P_D 0.9, 20 false alarms a scan over
+    20 km x 20 km) that set off across the line of sight (within 17° of it) at a random time
+    from 30 to 50 s, 140 s in all: four ``"take-off roll"`` aircraft speeding up at 2.5 m/s²
+    for 28 s (to 70 m/s) and four ``"vehicle"`` ones at 2 m/s² for 7.5 s (to 15 m/s). A
+    stopped track's gate is a few metres wide across the beam, and the target is 20-40 m
+    out of it a scan after it sets off."""
+    rng = np.random.default_rng(seed)
+    targets = []
+    for i in range(8):
+        aircraft = i < 4
+        rho, bearing = rng.uniform(1e3, 3e3), rng.uniform(0, 2 * math.pi)
+        heading = bearing + math.copysign(math.pi / 2, rng.uniform(-1, 1)) + rng.uniform(-0.3, 0.3)
+        start = rng.uniform(30.0, 50.0)
+        accel, duration = (2.5, 28.0) if aircraft else (2.0, 7.5)
+        name = "take-off roll" if aircraft else "vehicle"
+        manoeuvre = Manoeuvre(start, duration, 0.0, accel)
+        targets.append(_speed_changer(name, rho, bearing, AT_REST_SPEED, heading, manoeuvre))
+    return ScriptedScenario(tuple(targets), (_airfield_radar(period),), 140.0, seed=seed)

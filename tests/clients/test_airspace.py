@@ -4,10 +4,12 @@ import numpy as np
 import pytest
 
 from clients.scenarios.airspace import (
+    AT_REST_SPEED,
     Manoeuvre,
     PolarRadar,
     ScriptedScenario,
     ScriptedTarget,
+    apron_scenario,
     formation_scenario,
     mixed_speed_scenario,
     path_ranges,
@@ -106,3 +108,21 @@ def test_formation_scenario_three_radars_unsynchronized():
     assert 0 < first[1][1] - first[0][1] < 1.0
     speeds = np.hypot(*scans[0].truth_states[:, 2:].T)
     np.testing.assert_allclose(sorted(set(np.round(speeds))), [316.0, 361.0])
+
+
+def test_apron_scenario_sets_off_from_rest_across_the_line_of_sight():
+    sc = apron_scenario(seed=0)
+    scans = simulate_scripted(sc)
+    speeds = np.array([np.hypot(*s.truth_states[:, 2:].T) for s in scans])  # (scans, 8)
+    rolls = [i for i, c in sc.classes.items() if c == "take-off roll"]
+    vehicles = [i for i, c in sc.classes.items() if c == "vehicle"]
+    assert len(rolls) == len(vehicles) == 4
+    np.testing.assert_allclose(speeds[:8], AT_REST_SPEED)  # at rest for the first 28 s
+    np.testing.assert_allclose(speeds[-1, rolls], 70.0 + AT_REST_SPEED)
+    np.testing.assert_allclose(speeds[-1, vehicles], 15.0 + AT_REST_SPEED)
+    for i in range(8):
+        p = scans[0].truth_states[i, :2]
+        assert 1e3 <= np.hypot(*p) <= 3e3
+        v = scans[-1].truth_states[i, 2:]
+        cos = abs(p @ v) / (np.hypot(*p) * np.hypot(*v))
+        assert cos < np.sin(0.31)  # within 17° of across the line of sight

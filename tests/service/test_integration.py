@@ -267,6 +267,7 @@ def test_rest_config(service: RunningService, peer: zenoh.Session) -> None:
                 "gate_probability": 0.9999,
                 "manoeuvre_acceleration": 50.0,
                 "manoeuvre_turn_rate": 0.1,
+                "manoeuvre_speed_change": 3.0,
             }
             assert doc["motion"]["cv_turn_rate_std"] == 0.05
             patch = {"ingest": {"max_detections_per_batch": 10}}

@@ -7,17 +7,25 @@ then coasts away while a new track starts on the target. This module gives such 
 more chance, on the detections that no confirmed track has in its gate, under the hypothesis
 that the target manoeuvred since its last update τ ago.
 
-The manoeuvre is an unknown acceleration held since the last update, mostly across the
-track (aircraft and ships manoeuvre by turning). With the unit vectors u along the estimated
-velocity v and n across it, the acceleration's covariance is
+The manoeuvre is an unknown acceleration held since the last update, across the track (a
+turn) and along it (a change of speed). With the unit vectors u along the estimated velocity
+v and n across it, the acceleration's covariance is
 
-    A = σ_a² (n nᵀ + κ² u uᵀ),   σ_a² = a(|v|)² / 3,   a(|v|) = min(a_max, ω_max |v|),
+    A = a_n²/3 n nᵀ + a_u²/3 u uᵀ,   a_n = min(a_max, ω_max |v|),   a_u = max(κ a_n, a_s),
 
-a uniform acceleration in [−a, a] across the track (variance a²/3) and κ = 1/5 of it along;
-the lateral acceleration of a turn at rate ω is ω |v|, so slow targets get a small bound and
-parked ones none. Held over τ it adds to the predicted covariance of every IMM mode
+a uniform acceleration in [−a_n, a_n] across the track (variance a_n²/3) and in [−a_u, a_u]
+along it: at least κ = 1/5 of a_n, and at least a_s (``gating.manoeuvre_speed_change``), a
+target setting off, speeding up or braking. The lateral acceleration of a turn at rate ω is
+ω |v|, so slow targets turn little and parked ones not at all; a track whose speed is within
+two standard deviations of zero has no known direction to set off along, and gets a_u in
+every direction (a_n = a_u). Held over τ it adds to the predicted covariance of every IMM
+mode
 
     Q_m(τ) = [[τ⁴/4 A, τ³/2 A, 0], [τ³/2 A, τ² A, 0], [0, 0, 0]]   on (position, velocity, ω).
+
+A change of speed is searched for only where its gate expects fewer than 0.1 false alarms
+(λ π γ √det S): a wide search among many false alarms takes one now and then, and a slow
+target's track flies off with the velocity it gives. Elsewhere a pair is one of a turn alone.
 
 The pair (i, j) is then scored like any other, with the likelihood g_ij under P⁻ + Q_m and
 the prior probability that the target started to manoeuvre within τ, p_m = 1 − e^(−τ/τ_cv)
@@ -36,7 +44,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from trackers.association.gating import gate, max_eigenvalue_2x2
+from trackers.association.gating import gate, inverse_2x2, max_eigenvalue_2x2
 from trackers.association.gnn import gnn_assign
 from trackers.filters.imm import imm_update
 from trackers.models.measurement import H_POSITION
@@ -60,40 +68,75 @@ ALONG_TRACK_FRACTION = 0.2
 REACH_FRACTION = 0.5
 
 
-def _acceleration_bound(velocity: np.ndarray, a_max: float, omega_max: float) -> np.ndarray:
-    """a(|v|) = min(a_max, ω_max |v|) for velocities (N, 2)."""
-    return np.minimum(a_max, omega_max * np.hypot(velocity[:, 0], velocity[:, 1]))
+def _acceleration_bounds(
+    velocity: np.ndarray,
+    a_max: float,
+    omega_max: float,
+    a_speed: float | np.ndarray = 0.0,
+    at_rest: np.ndarray | None = None,
+) -> tuple[np.ndarray, np.ndarray]:
+    """The bounds across and along the track for velocities (N, 2):
+    ``a_n = min(a_max, ω_max |v|)`` and ``a_u = max(κ a_n, min(a_speed, a_max))``; where
+    ``at_rest``, whose direction is unknown, ``a_u`` across too."""
+    a_n = np.minimum(a_max, omega_max * np.hypot(velocity[:, 0], velocity[:, 1]))
+    a_u = np.maximum(ALONG_TRACK_FRACTION * a_n, np.minimum(a_speed, a_max))
+    if at_rest is not None:
+        a_n = np.where(at_rest, np.maximum(a_n, a_u), a_n)
+    return a_n, a_u
+
+
+def at_rest(velocity: np.ndarray, P_v: np.ndarray) -> np.ndarray:
+    """Mask of the velocities (N, 2) within two standard deviations of zero, whose direction
+    is unknown: ``|v|² ≤ 4 λ_max(P_v)``."""
+    return velocity[:, 0] ** 2 + velocity[:, 1] ** 2 <= 4.0 * max_eigenvalue_2x2(P_v)
 
 
 def reaches_beyond(
-    x_comb: np.ndarray, P_comb: np.ndarray, tau: np.ndarray, a_max: float, omega_max: float
+    x_comb: np.ndarray,
+    P_comb: np.ndarray,
+    tau: np.ndarray,
+    a_max: float,
+    omega_max: float,
+    a_speed: float = 0.0,
 ) -> np.ndarray:
     """Mask of the tracks (``x_comb (N, 5)``, ``P_comb (N, 5, 5)``, ``τ`` since their last
     update) whose manoeuvre reaches beyond their own uncertainty, which their gate searched
-    already: the across-track std ``a/√3 · τ²/2`` above ``REACH_FRACTION`` of the largest
-    predicted position std,
+    already: the larger of its std across and along the track, ``a/√3 · τ²/2``, above
+    ``REACH_FRACTION`` of the largest predicted position std,
 
-        (a² / 3) (τ⁴ / 4) > REACH_FRACTION² λ_max(P_pos),   a = min(a_max, ω_max |v|).
-    """
-    a = _acceleration_bound(x_comb[:, 2:4], a_max, omega_max)
+        (a² / 3) (τ⁴ / 4) > REACH_FRACTION² λ_max(P_pos),   a = max(a_n, a_u)
+
+    (:func:`manoeuvre_covariance`)."""
+    a_n, a_u = _acceleration_bounds(x_comb[:, 2:4], a_max, omega_max, a_speed)
+    a = np.maximum(a_n, a_u)
     reach = (a * a / 3.0) * (tau**4 / 4.0)
     return reach > REACH_FRACTION**2 * max_eigenvalue_2x2(P_comb[:, :2, :2])
 
 
 def manoeuvre_covariance(
-    velocity: np.ndarray, tau: np.ndarray, a_max: float, omega_max: float
+    velocity: np.ndarray,
+    tau: np.ndarray,
+    a_max: float,
+    omega_max: float,
+    a_speed: float | np.ndarray = 0.0,
+    rest: np.ndarray | None = None,
 ) -> np.ndarray:
     """Q_m(τ) (N, 5, 5) for velocities (N, 2) and times since the last update τ (N,):
-    ``A = a²/3 (n nᵀ + κ² u uᵀ)`` with ``a = min(a_max, ω_max |v|)``, then
-    ``[[τ⁴/4 A, τ³/2 A], [τ³/2 A, τ² A]]`` on (position, velocity) and 0 on ω."""
+    ``A = a_n²/3 n nᵀ + a_u²/3 u uᵀ`` with ``a_n = min(a_max, ω_max |v|)`` across the track
+    and ``a_u = max(κ a_n, min(a_speed, a_max))`` along it (``a_speed``: a change of speed,
+    one number or one per track), then ``[[τ⁴/4 A, τ³/2 A], [τ³/2 A, τ² A]]`` on (position,
+    velocity) and 0 on ω."""
     velocity = np.asarray(velocity, dtype=float).reshape(-1, 2)
     tau = np.asarray(tau, dtype=float).reshape(-1)
     speed = np.hypot(velocity[:, 0], velocity[:, 1])
-    a = _acceleration_bound(velocity, a_max, omega_max)
-    u = velocity / np.where(speed > 0, speed, 1.0)[:, None]
+    a_n, a_u = _acceleration_bounds(velocity, a_max, omega_max, a_speed, rest)
+    # A velocity of exactly 0 has no direction: x is taken for it (at rest, a_n = a_u).
+    u = np.where(
+        (speed > 0)[:, None], velocity / np.where(speed > 0, speed, 1.0)[:, None], [1.0, 0.0]
+    )
     n = np.stack([-u[:, 1], u[:, 0]], axis=1)
-    A = n[:, :, None] * n[:, None, :] + ALONG_TRACK_FRACTION**2 * (u[:, :, None] * u[:, None, :])
-    A *= (a * a / 3.0)[:, None, None]
+    A = (a_n * a_n / 3.0)[:, None, None] * (n[:, :, None] * n[:, None, :])
+    A += (a_u * a_u / 3.0)[:, None, None] * (u[:, :, None] * u[:, None, :])
     Q = np.zeros((tau.size, STATE_DIM, STATE_DIM))
     Q[:, 0:2, 0:2] = A * (tau**4 / 4.0)[:, None, None]
     Q[:, 0:2, 2:4] = Q[:, 2:4, 0:2] = A * (tau**3 / 2.0)[:, None, None]
@@ -111,30 +154,31 @@ def _speed_kept(
     a_max: float,
     omega_max: float,
     max_speed: float,
+    a_speed: float | np.ndarray = 0.0,
 ) -> np.ndarray:
     """Mask of the updated pairs (IMM posteriors ``x (K, M, 5)``, ``mu (K, M)``) whose speed
     stays within three standard deviations of the track's (``x_comb``, ``P_comb`` before,
     ``τ`` since its last update) under the manoeuvre's along-track part and goes no more
     than that beyond ``max_speed`` (``v_max``) or the track's own speed::
 
-        | |v⁺| − |v⁻| | ≤ 3 σ_s,   σ_s² = (κ a τ)² / 3 + uᵀ P_v u + (2/τ)² uᵀ R u,
+        | |v⁺| − |v⁻| | ≤ 3 σ_s,   σ_s² = (a_u τ)² / 3 + uᵀ P_v u + (2/τ)² uᵀ R u,
         |v⁺| ≤ max(v_max, |v⁻|) + 3 σ_s,
 
     ``v⁺ = Σ_j μ_j v_j`` the combined velocity after the update, ``u`` the unit vector along
     ``v⁻`` (``uᵀ P_v u``: the variance of the speed; the turn rate's uncertainty widens
     ``P_v`` across the track, in direction, by hundreds of m/s after 20 s of coasting at
-    450 m/s), ``a = min(a_max, ω_max |v⁻|)``, and the detection's own noise ``R``, which the
-    update turns into a velocity over ``τ`` (an aircraft 150 km from a radar of 1.5 mrad is
-    seen 225 m across the beam: 45 m/s over 10 s).
+    450 m/s), ``a_u`` the along-track bound of :func:`manoeuvre_covariance`, and the
+    detection's own noise ``R``, which the update turns into a velocity over ``τ`` (an
+    aircraft 150 km from a radar of 1.5 mrad is seen 225 m across the beam: 45 m/s over 10 s).
     A turn at constant speed passes (90° in 20 s by a 236 m/s aircraft: about +75 m/s from
     the Gaussian update against 3 σ_s ≈ 165 m/s); a false alarm 6 km across it does not."""
     v_new = np.einsum("km,kmi->ki", mu, x[:, :, 2:4])
     v_old = x_comb[:, 2:4]
     before = np.hypot(v_old[:, 0], v_old[:, 1])
     u = v_old / np.where(before > 0, before, 1.0)[:, None]
-    a = _acceleration_bound(v_old, a_max, omega_max)
+    _, a_u = _acceleration_bounds(v_old, a_max, omega_max, a_speed)
     var = (
-        (ALONG_TRACK_FRACTION * a * tau) ** 2 / 3.0
+        (a_u * tau) ** 2 / 3.0
         + np.einsum("ki,kij,kj->k", u, P_comb[:, 2:4, 2:4], u)
         + (2.0 / tau) ** 2 * np.einsum("ki,kij,kj->k", u, R, u)
     )
@@ -176,6 +220,8 @@ def manoeuvre_search(
     straight_sojourn: float,
     gamma: float,
     max_speed: float = np.inf,
+    a_speed: float = 0.0,
+    quiet: float = np.inf,
 ) -> ManoeuvreMatch | None:
     """Tracks (predicted mode states ``x_pred (N, M, 5)``, ``P_pred``, ``c_bar (N, M)``, their
     combination ``x_comb (N, 5)``, ``P_comb``, time since the last update ``tau``, detection
@@ -184,7 +230,13 @@ def manoeuvre_search(
     manoeuvre hypothesis: the chi-square gate ``γ`` on ``P_comb + Q_m``, the gain
     ``G = hit + ln p_m − ln(1 − P_D)`` and GNN over the positive gains (module docstring),
     among the pairs whose updated speed is kept (:func:`_speed_kept`: the speed of a turn,
-    and not much beyond ``max_speed``). None when nothing is taken."""
+    and not much beyond ``max_speed``). None when nothing is taken.
+
+    ``a_speed`` bounds a change of speed along the track (:func:`manoeuvre_covariance`); it
+    widens the search of a pair (i, j) only where that search expects fewer than ``quiet``
+    false alarms, ``λ_j π γ √det(P_pos + Q_m + R_j) < quiet``: elsewhere the pair is searched
+    for a turn alone (``a_speed`` 0), as a wide search among many false alarms takes one
+    now and then and sends the track off with its velocity."""
     N = x_comb.shape[0]
     if N == 0 or z.shape[0] == 0 or a_max <= 0:
         return None
@@ -192,10 +244,22 @@ def manoeuvre_search(
     # searched already: its across-track std, a/√3 · τ²/2, above half the largest predicted
     # position std. (Slow targets in the reference scenario never get there; the cut leaves
     # the mixed-speed scenarios' answers as they are and saves 4/5 of the search's time.)
-    wide = np.flatnonzero(reaches_beyond(x_comb, P_comb, tau, a_max, omega_max))
+    wide = np.flatnonzero(reaches_beyond(x_comb, P_comb, tau, a_max, omega_max, a_speed))
     if wide.size == 0:
         return None
     Q = manoeuvre_covariance(x_comb[wide, 2:4], tau[wide], a_max, omega_max)
+    Q_u = (
+        Q
+        if a_speed <= 0
+        else manoeuvre_covariance(
+            x_comb[wide, 2:4],
+            tau[wide],
+            a_max,
+            omega_max,
+            a_speed,
+            at_rest(x_comb[wide, 2:4], P_comb[wide, 2:4, 2:4]),
+        )
+    )
     S0 = P_comb[wide, :2, :2] + Q[:, :2, :2]
     # No detection can do better than one at zero innovation, with S ⪰ S0:
     # G ≤ ln(P_D p_m / (2π √|S0| λ_fa)) − ln(1 − P_D). Tracks that cannot gain are left out.
@@ -209,11 +273,29 @@ def manoeuvre_search(
     hopeful = np.flatnonzero(best > 0)
     if hopeful.size == 0:
         return None
-    pairs = gate(x_comb[wide[hopeful], :2], S0[hopeful], z, R, gamma)
+    S_u = P_comb[wide[hopeful], :2, :2] + Q_u[hopeful, :2, :2]  # ⪰ S0: gates all pairs
+    pairs = gate(x_comb[wide[hopeful], :2], S_u, z, R, gamma)
     if pairs.size == 0:
         return None
-    ti, dj = wide[hopeful[pairs.track]], pairs.detection
-    Q_t, p_m = Q[hopeful[pairs.track]], p_m[hopeful[pairs.track]]
+    ti, dj, h = wide[hopeful[pairs.track]], pairs.detection, hopeful[pairs.track]
+    Q_t, p_m = Q_u[h], p_m[h]
+    a_pair: float | np.ndarray = a_speed
+    if Q_u is not Q:
+        # Where the change of speed's search is not quiet, the pair is one of a turn alone,
+        # in that gate.
+        S_j = S_u[pairs.track] + R[dj]
+        det_j = S_j[:, 0, 0] * S_j[:, 1, 1] - S_j[:, 0, 1] * S_j[:, 1, 0]
+        calm = lam[dj] * np.pi * gamma * np.sqrt(det_j) < quiet
+        S_n = S0[h] + R[dj]
+        nu = z[dj] - x_comb[ti, :2]
+        S_inv, _ = inverse_2x2(S_n)
+        turn = ~calm & (np.einsum("ki,kij,kj->k", nu, S_inv, nu) <= gamma)
+        keep = calm | turn
+        ti, dj, h, calm, p_m = ti[keep], dj[keep], h[keep], calm[keep], p_m[keep]
+        Q_t = np.where(calm[:, None, None], Q_u[h], Q[h])
+        a_pair = np.where(calm, a_speed, 0.0)
+        if ti.size == 0:
+            return None
     x, P, mu, loglik = imm_update(
         x_pred[ti], P_pred[ti] + Q_t[:, None], c_bar[ti], z[dj], R[dj], H_POSITION
     )
@@ -222,7 +304,9 @@ def manoeuvre_search(
     # A turn keeps the speed: a detection that only a change of speed beyond the along-track
     # part of the manoeuvre reaches (a false alarm kilometres across the track of an
     # aircraft coasting through two misses) is no manoeuvre of this target.
-    keep = _speed_kept(x, mu, x_comb[ti], P_comb[ti], R[dj], tau[ti], a_max, omega_max, max_speed)
+    keep = _speed_kept(
+        x, mu, x_comb[ti], P_comb[ti], R[dj], tau[ti], a_max, omega_max, max_speed, a_pair
+    )
     ti, dj, x, P, mu, hit = ti[keep], dj[keep], x[keep], P[keep], mu[keep], hit[keep]
     sel = gnn_assign(ti, dj, hit - miss_increment(pd[ti]), N, z.shape[0])
     if sel.size == 0:

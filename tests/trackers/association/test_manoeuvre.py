@@ -3,6 +3,7 @@ import pytest
 
 from trackers.association.manoeuvre import (
     ALONG_TRACK_FRACTION,
+    at_rest,
     manoeuvre_covariance,
     manoeuvre_search,
     reaches_beyond,
@@ -179,3 +180,69 @@ def test_reaches_beyond_compares_the_manoeuvre_with_the_track_uncertainty() -> N
     tau = np.array([8.0, 8.0, 1.0])
     out = reaches_beyond(x, P, tau, a_max=50.0, omega_max=0.1)
     np.testing.assert_array_equal(out, [True, False, False])
+
+
+def test_covariance_with_a_change_of_speed_along_the_track():
+    """``a_u = max(κ a_n, a_speed)`` along the velocity: v = (100, 0), τ = 2 s, a_n = 10 m/s²
+    across; a_speed 3 m/s² beats κ a_n = 2 along, 1 does not; at rest, a_u in every
+    direction."""
+    v, tau = np.array([[100.0, 0.0]]), np.array([2.0])
+    Q = manoeuvre_covariance(v, tau, 50.0, 0.1, a_speed=3.0)[0]
+    assert Q[0, 0] == pytest.approx(9.0 / 3.0 * 2.0**4 / 4.0)  # along x: a_u² / 3 · τ⁴ / 4
+    assert Q[2, 2] == pytest.approx(9.0 / 3.0 * 2.0**2)
+    assert Q[1, 1] == pytest.approx(100.0 / 3.0 * 2.0**4 / 4.0)  # across: a_n unchanged
+    np.testing.assert_allclose(
+        manoeuvre_covariance(v, tau, 50.0, 0.1, a_speed=1.0),
+        manoeuvre_covariance(v, tau, 50.0, 0.1),
+    )
+    slow = np.array([[0.5, 0.0]])  # a_n = 0.05 across
+    Q = manoeuvre_covariance(slow, tau, 50.0, 0.1, a_speed=3.0, rest=np.array([True]))[0]
+    np.testing.assert_allclose(Q[0:2, 0:2], 3.0 * 4.0 * np.eye(2), rtol=1e-12)
+    Q = manoeuvre_covariance(slow, tau, 50.0, 0.1, a_speed=3.0, rest=np.array([False]))[0]
+    assert Q[1, 1] < 0.01 * Q[0, 0]
+
+
+def test_at_rest_is_a_speed_within_two_standard_deviations_of_zero():
+    v = np.array([[1.0, 1.0], [3.0, 0.0], [0.0, 0.0]])
+    P_v = np.tile(np.diag([1.0, 0.25]), (3, 1, 1))  # λ_max 1: |v| ≤ 2
+    np.testing.assert_array_equal(at_rest(v, P_v), [True, False, True])
+
+
+def test_reaches_beyond_with_a_change_of_speed():
+    """A parked car (a_n = 0) lost for 8 s: a start at 3 m/s² reaches 55 m (std), beyond half
+    its 10 m."""
+    x = np.zeros((1, 5))
+    P = np.diag([100.0, 100.0, 1.0, 1.0, 1e-4])[None]
+    tau = np.array([8.0])
+    assert not reaches_beyond(x, P, tau, a_max=50.0, omega_max=0.1)[0]
+    assert reaches_beyond(x, P, tau, a_max=50.0, omega_max=0.1, a_speed=3.0)[0]
+
+
+def _search_from_rest(z, clutter_density, a_speed=3.0):
+    """A track at rest at the origin (2 m position std, 1 m/s velocity std), 4 s since its
+    last update, searched for a start at ``a_speed`` where fewer than 0.1 false alarms are
+    expected (detections of 2 m std)."""
+    x = np.zeros((1, 2, 5))
+    P = np.tile(np.diag([4.0, 4.0, 1.0, 1.0, 1e-4]), (1, 2, 1, 1))
+    return manoeuvre_search(
+        x, P, np.array([[0.9, 0.1]]), x[:, 0], P[:, 0], np.array([4.0]), np.asarray(z, float),
+        np.tile(4.0 * np.eye(2), (len(z), 1, 1)), np.array([0.9]), clutter_density,
+        a_max=50.0, omega_max=0.1, straight_sojourn=30.0, gamma=18.4, a_speed=a_speed,
+        quiet=0.1,
+    )  # fmt: skip
+
+
+def test_search_finds_a_target_setting_off_from_rest_where_few_false_alarms_are():
+    """20 m off after 4 s (2.5 m/s² from rest), outside the 12 m gate of the track at rest:
+    found at 1e-6 false alarms per m² (the start's gate, S ≈ 200 m², expects 0.01); not at
+    1e-5 (0.12: searched for a turn alone, which a track at rest cannot make), nor without
+    a change of speed; the updated speed is a start's, about 10 m/s."""
+    found = _search_from_rest([[20.0, 0.0]], 1e-6)
+    assert found is not None and found.detection.tolist() == [0]
+    speed = np.hypot(*np.einsum("km,kmi->ki", found.mu, found.x[:, :, 2:4])[0])
+    assert 5.0 < speed < 15.0
+    assert _search_from_rest([[20.0, 0.0]], 1e-5) is None
+    assert _search_from_rest([[20.0, 0.0]], 1e-6, a_speed=0.0) is None
+    # Per detection: a quiet one is found beside a crowded one.
+    found = _search_from_rest([[0.0, -20.0], [20.0, 0.0]], np.array([1e-5, 1e-6]))
+    assert found is not None and found.detection.tolist() == [1]
