@@ -305,6 +305,10 @@ _TIME_HINTS = {
 }
 
 
+#: Added to an error in the shape of a covariance (a flat list of four numbers, say).
+COV_SHAPE_HINT = "a cov is a 2x2 matrix, [[var_x, cov_xy], [cov_xy, var_y]] in m²"
+
+
 def _location(loc: tuple[int | str, ...]) -> str:
     out = ""
     for part in loc:
@@ -351,6 +355,8 @@ def format_validation_error(exc: ValidationError, errors: list[Any] | None = Non
         parts.append(f"{place}: {msg}" if place else msg)
     if len(errors) > 3:
         parts.append(f"and {len(errors) - 3} more")
+    if any("cov" in err["loc"] and err["type"] != "value_error" for err in errors[:3]):
+        parts[-1] += f" ({COV_SHAPE_HINT})"
     return "; ".join(parts)
 
 

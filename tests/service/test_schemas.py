@@ -124,6 +124,13 @@ BAD: list[tuple[bytes, str, str]] = [
     ),
     (orjson.dumps(_det(0, cov=[[1, 0]])), "invalid_batch", "detections[0].cov[1]: missing"),
     (
+        orjson.dumps(_det(0, cov=[625, 0, 0, 625])),
+        "invalid_batch",
+        "detections[0].cov: too many items (at most 2) (a cov is a 2x2 matrix,"
+        " [[var_x, cov_xy], [cov_xy, var_y]] in m²)",
+    ),
+    (orjson.dumps(_batch(cov=[625, 0])), "invalid_batch", "[[var_x, cov_xy], [cov_xy, var_y]]"),
+    (
         orjson.dumps(_batch(cov=[[0, 0], [0, 0]])),
         "invalid_batch",
         "cov: not symmetric positive definite",
@@ -470,3 +477,10 @@ def test_unknown_fields_are_named_after_the_rest_is_valid() -> None:
     with pytest.raises(BatchError) as info:
         decode_batch(orjson.dumps(_det(2, colour="red", z=1)))
     assert info.value.detail == "detections[2].colour: unknown field"
+
+
+def test_only_a_covariance_shape_error_gets_the_shape_hint() -> None:
+    for payload in (_det(0, cov=[[1, 2], [2, 1]]), _batch(pd=2), _batch(sensor_position=[0])):
+        with pytest.raises(BatchError) as info:
+            decode_batch(orjson.dumps(payload))
+        assert "2x2 matrix" not in info.value.detail, info.value.detail
