@@ -296,8 +296,8 @@ class GatingConfig:
     manoeuvre_speed_change: float = _field(
         3.0,
         "and as far as a change of speed at this acceleration reaches along its velocity (a"
-        " target setting off, speeding up or braking), where that search expects fewer than"
-        " 0.1 false alarms, m/s² (0: only the turn's fifth)",
+        " target setting off, speeding up or braking; at most manoeuvre_acceleration), where"
+        " that search expects fewer than 0.1 false alarms, m/s² (0: only the turn's fifth)",
         ge=0,
         le=1e4,
     )

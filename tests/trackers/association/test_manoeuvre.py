@@ -246,3 +246,94 @@ def test_search_finds_a_target_setting_off_from_rest_where_few_false_alarms_are(
     # Per detection: a quiet one is found beside a crowded one.
     found = _search_from_rest([[0.0, -20.0], [20.0, 0.0]], np.array([1e-5, 1e-6]))
     assert found is not None and found.detection.tolist() == [1]
+
+
+def _two_tracks_search(z, clutter_density, a_speed, quiet=0.1):
+    """Track 0, far off and 1 s since its update, whose manoeuvre stays inside its gate (not
+    searched), and track 1, a 20 m/s track along x (2 m position std, 1 m/s velocity std)
+    4 s after its last update; detections of 2 m std."""
+    P0 = np.diag([1e4, 1e4, 1.0, 1.0, 1e-4])
+    P1 = np.diag([4.0, 4.0, 1.0, 1.0, 1e-4])
+    x = np.zeros((2, 2, 5))
+    x[0, :, :2] = 5e3
+    x[1, :, 2] = 20.0
+    P = np.stack([np.tile(P0, (2, 1, 1)), np.tile(P1, (2, 1, 1))])
+    return manoeuvre_search(
+        x, P, np.array([[0.9, 0.1]] * 2), x[:, 0], P[:, 0], np.array([1.0, 4.0]),
+        np.asarray(z, float), np.tile(4.0 * np.eye(2), (len(z), 1, 1)), np.array([0.9, 0.9]),
+        clutter_density, a_max=50.0, omega_max=0.1, straight_sojourn=30.0, gamma=18.4,
+        a_speed=a_speed, quiet=quiet,
+    )  # fmt: skip
+
+
+def test_where_the_search_is_crowded_a_pair_is_one_of_a_turn_exactly_as_before():
+    """15 m across the prediction (a 2 m/s² turn) at 2e-5 false alarms per m², where the
+    change of speed's gate is crowded: the same match, state and gain as without a change of
+    speed. 24 m ahead (3 m/s² faster, no turn gets there): found where quiet (2e-6), not
+    where crowded, found there too when no bound is set."""
+    turn = [[0.0, 15.0]]
+    old, new = _two_tracks_search(turn, 2e-5, 0.0), _two_tracks_search(turn, 2e-5, 3.0)
+    assert old is not None and new is not None
+    assert new.track.tolist() == old.track.tolist() == [1]
+    for field in ("x", "P", "mu", "hit"):
+        np.testing.assert_allclose(getattr(new, field), getattr(old, field), rtol=1e-12)
+    ahead = [[24.0, 0.0]]
+    found = _two_tracks_search(ahead, 2e-6, 3.0)
+    assert found is not None and found.track.tolist() == [1]
+    assert _two_tracks_search(ahead, 2e-5, 3.0) is None
+    assert _two_tracks_search(ahead, 2e-5, 3.0, quiet=np.inf) is not None
+
+
+def test_the_change_of_speed_is_at_most_the_manoeuvre_acceleration():
+    v, tau = np.array([[10.0, 0.0]]), np.array([2.0])
+    capped = manoeuvre_covariance(v, tau, 5.0, 0.1, a_speed=1e4)
+    np.testing.assert_allclose(capped, manoeuvre_covariance(v, tau, 5.0, 0.1, a_speed=5.0))
+
+
+def _tracker_sees_a_start_from_rest(clutter_density, a_speed=3.0):
+    """A confirmed track of a target at rest 1 km out (2 m detection std, T = 4 s), whose
+    target is then seen 35 m off, beyond its gate: the track's position after that scan."""
+    config = TrackerConfig().merged({"gating": {"manoeuvre_speed_change": a_speed}})
+    tracker = IndividualTracker(config)
+    R = np.tile(4.0 * np.eye(2), (1, 1, 1))
+    rng = np.random.default_rng(3)
+    for k in range(10):
+        z = np.array([[1000.0, 0.0]]) + rng.normal(0.0, 2.0, (1, 2))
+        tracker.step(Scan("r", 4.0 * k, z, R, clutter_density=clutter_density))
+    result = tracker.step(
+        Scan("r", 40.0, np.array([[1000.0, 35.0]]), R, clutter_density=clutter_density)
+    )
+    (track,) = [t for t in result.tracks if t.id == "T1"]
+    return track.status, np.asarray(track.position)
+
+
+def test_the_tracker_looks_for_a_start_from_rest_only_where_the_search_is_quiet():
+    """At 1e-7 false alarms per m² the track follows its target off (the search for a start
+    expects about 0.001 false alarms); at 2e-5 (0.1 and more) it stays, missed, and so it
+    does without the change of speed."""
+    status, position = _tracker_sees_a_start_from_rest(1e-7)
+    assert status == "confirmed" and position[1] > 25.0
+    status, position = _tracker_sees_a_start_from_rest(2e-5)
+    assert status == "confirmed" and abs(position[1]) < 5.0
+    status, position = _tracker_sees_a_start_from_rest(1e-7, a_speed=0.0)
+    assert status == "confirmed" and abs(position[1]) < 5.0
+
+
+def test_a_crowded_pair_of_a_track_whose_turn_stays_in_its_gate_is_not_searched():
+    """A 2 m/s track (its turn, 0.2 m/s², stays inside its gate) 4 s after its last update,
+    a detection 5 m off at 2e-5 false alarms per m²: the change of speed's gate is crowded,
+    and a turn alone was never searched for such a track: nothing, with or without it."""
+    x = np.zeros((1, 2, 5))
+    x[0, :, 2] = 2.0
+    P = np.tile(np.diag([4.0, 4.0, 1.0, 1.0, 1e-4]), (1, 2, 1, 1))
+
+    def search(a_speed):
+        return manoeuvre_search(
+            x, P, np.array([[0.9, 0.1]]), x[:, 0], P[:, 0], np.array([4.0]),
+            np.array([[0.0, 5.0]]), 4.0 * np.eye(2)[None], np.array([0.9]), 2e-5,
+            a_max=50.0, omega_max=0.1, straight_sojourn=30.0, gamma=18.4, a_speed=a_speed,
+            quiet=0.1,
+        )  # fmt: skip
+
+    assert search(0.0) is None
+    assert search(3.0) is None
