@@ -30,7 +30,12 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from trackers.association.gating import GatedPairs, gate, max_eigenvalue_2x2
+from trackers.association.gating import (
+    GatedPairs,
+    expected_false_alarms,
+    gate,
+    max_eigenvalue_2x2,
+)
 from trackers.association.gnn import gnn_assign
 from trackers.association.manoeuvre import ManoeuvreMatch, manoeuvre_search, reaches_beyond
 from trackers.association.spatial import pairs_within
@@ -1690,7 +1695,7 @@ def _crowded_gates(
 def _expects_clutter(lam: float | np.ndarray, det: np.ndarray, gamma: float) -> np.ndarray:
     """Whether gates ``mᵀ S⁻¹ m ≤ γ`` of ``det S`` expect at least :data:`GATE_CLUTTER`
     false alarms at densities ``lam``: ``λ π γ √det S ≥ GATE_CLUTTER``."""
-    return lam * np.pi * gamma * np.sqrt(np.maximum(det, 0.0)) >= GATE_CLUTTER
+    return expected_false_alarms(lam, det, gamma) >= GATE_CLUTTER
 
 
 def _looks(

@@ -24,6 +24,7 @@ from trackers.association.spatial import pairs_within
 
 __all__ = [
     "GatedPairs",
+    "expected_false_alarms",
     "gate",
     "inverse_2x2",
     "log_gaussian_2d",
@@ -66,6 +67,12 @@ def position_noise(R: np.ndarray) -> float | None:
     s = np.sort(max_eigenvalue_2x2(R))
     n = s.size
     return float(0.5 * (math.sqrt(s[(n - 1) // 2]) + math.sqrt(s[n // 2])))
+
+
+def expected_false_alarms(lam: float | np.ndarray, det: np.ndarray, gamma: float) -> np.ndarray:
+    """The false alarms a chi-square gate ``mᵀ S⁻¹ m ≤ γ`` of ``det S`` expects at density
+    ``lam`` (per m²): ``λ V``, ``V = π γ √det S`` its area."""
+    return lam * np.pi * gamma * np.sqrt(np.maximum(det, 0.0))
 
 
 def inverse_2x2(S: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -45,7 +45,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from trackers.association.gating import gate, inverse_2x2, max_eigenvalue_2x2
+from trackers.association.gating import (
+    expected_false_alarms,
+    gate,
+    inverse_2x2,
+    max_eigenvalue_2x2,
+)
 from trackers.association.gnn import gnn_assign
 from trackers.filters.imm import imm_update
 from trackers.models.measurement import H_POSITION
@@ -292,7 +297,7 @@ def manoeuvre_search(
         # without the change of speed.
         S_j = S_u[pairs.track] + R[dj]
         det_j = S_j[:, 0, 0] * S_j[:, 1, 1] - S_j[:, 0, 1] * S_j[:, 1, 0]
-        calm = lam[dj] * np.pi * gamma * np.sqrt(det_j) < quiet
+        calm = expected_false_alarms(lam[dj], det_j, gamma) < quiet
         S_n = S0[h] + R[dj]
         nu = z[dj] - x_comb[ti, :2]
         S_inv, _ = inverse_2x2(S_n)

@@ -37,7 +37,6 @@ __all__ = [
     "CoordinatedTurn",
     "MotionModel",
     "along_track_noise",
-    "along_track_noise_blocks",
     "batch_major",
     "batch_major_cov",
     "build_models",
@@ -148,18 +147,6 @@ def _add_noise(Ps: np.ndarray, Q: np.ndarray) -> None:
     Ps += Q.reshape(STATE_DIM, STATE_DIM, *(1,) * (Ps.ndim - 2))
 
 
-def along_track_noise_blocks(v: np.ndarray, q: float) -> np.ndarray:
-    """``q u uᵀ`` for velocities ``v (..., 2)``, ``u = v / ‖v‖``, flattened as
-    ``(..., 4)`` = (xx, xy, yx, yy): the 2 x 2 block that :func:`along_track_noise` scales.
-    A velocity of 0 has no direction: ``q I / 2``."""
-    v2 = np.einsum("...i,...i->...", v, v)
-    out = (v[..., :, None] * v[..., None, :]) * (q / np.maximum(v2, 1e-300))[..., None, None]
-    out = out.reshape(*v.shape[:-1], 4)
-    if v2.size and v2.min() < 1e-18:
-        out[v2 < 1e-18] = (0.5 * q, 0.0, 0.0, 0.5 * q)
-    return out
-
-
 def along_track_noise(x: np.ndarray, q: float, dt: float | np.ndarray) -> np.ndarray:
     """White acceleration noise of PSD ``q`` (m²/s³) along each state's velocity over ``dt``:
 
@@ -175,7 +162,12 @@ def along_track_noise(x: np.ndarray, q: float, dt: float | np.ndarray) -> np.nda
     if not (np.isfinite(T).all() and (T >= 0.0).all()):
         raise ValueError(f"dt: must be finite numbers >= 0, got {dt!r}")
     T = np.broadcast_to(T, x.shape[:-1])[..., None, None]
-    uu = along_track_noise_blocks(x[..., 2:4], q).reshape(*x.shape[:-1], 2, 2)
+    v = x[..., 2:4]
+    v2 = np.einsum("...i,...i->...", v, v)
+    uu = (v[..., :, None] * v[..., None, :]) * (q / np.maximum(v2, 1e-300))[..., None, None]
+    rest = v2 < 1e-18
+    if rest.any():
+        uu[rest] = 0.5 * q * np.eye(2)
     t2 = T * T
     Q = np.zeros((*x.shape[:-1], STATE_DIM, STATE_DIM))
     Q[..., 0:2, 0:2] = (t2 * T / 3.0) * uu

@@ -2,7 +2,13 @@ import numpy as np
 import pytest
 from scipy.stats import multivariate_normal
 
-from trackers.association.gating import gate, inverse_2x2, log_gaussian_2d, max_eigenvalue_2x2
+from trackers.association.gating import (
+    expected_false_alarms,
+    gate,
+    inverse_2x2,
+    log_gaussian_2d,
+    max_eigenvalue_2x2,
+)
 
 
 def brute_force_pairs(z_pred, P_pred, z, R, gamma):
@@ -87,4 +93,15 @@ def test_gate_empty_inputs():
             9.0,
         ).size
         == 0
+    )
+
+
+def test_expected_false_alarms_is_the_density_times_the_gate_area():
+    """A gate of γ = 18.4 on S = diag(100², 50²) is an ellipse of semi-axes √γ·100 and
+    √γ·50: area π γ · 5000 m², so 1e-6 per m² expects 0.289 false alarms; per density too."""
+    det = np.array([100.0**2 * 50.0**2])
+    assert expected_false_alarms(1e-6, det, 18.4)[0] == pytest.approx(np.pi * 18.4 * 5e-3)
+    lam = np.array([1e-6, 2e-6])
+    np.testing.assert_allclose(
+        expected_false_alarms(lam, np.repeat(det, 2), 18.4), lam * np.pi * 18.4 * 5000.0
     )

@@ -13,7 +13,6 @@ from trackers.models.motion import (
     ConstantVelocity,
     CoordinatedTurn,
     along_track_noise,
-    along_track_noise_blocks,
     batch_major,
     batch_major_cov,
     build_models,
@@ -421,8 +420,5 @@ def test_along_track_noise_lies_along_the_velocity() -> None:
     across = np.array([-4.0, 3.0]) / 5.0
     assert across @ Q[0, 2:4, 2:4] @ across == pytest.approx(0.0, abs=1e-12)
     np.testing.assert_allclose(Q[1, 2:4, 2:4], 2.0 * 2.0 * 0.5 * np.eye(2))
-    np.testing.assert_allclose(
-        along_track_noise_blocks(np.array([3.0, 4.0]), 2.0), 2.0 * uu.reshape(4)
-    )
     with pytest.raises(ValueError):
         along_track_noise(np.zeros(5), -1.0, 1.0)
