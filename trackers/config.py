@@ -324,7 +324,10 @@ class TrackManagementConfig:
     ``pd`` and ``clutter_density`` (λ_fa, per m²) are used when a scan does not carry its own;
     with ``clutter_map`` the density of a scan that carries none is learned per area
     (:mod:`trackers.clutter`), ``clutter_density`` its prior.
-    ``new_target_density`` is λ_nt per m² per scan. The confirmation threshold is
+    ``new_target_density`` is λ_nt per m² per scan; a new track starts at
+    ``ln(λ_nt / λ_fa)``, but never below ``ln 0.01`` (λ_nt counts as at least a hundredth of
+    the false-alarm density where that is dense: :data:`trackers.scoring.MIN_NEW_TARGET_ODDS`).
+    The confirmation threshold is
     ``ln((1 − β)/α)`` and the deletion threshold ``ln(β/(1 − α))`` with α =
     ``p_false_confirm`` and β = ``p_true_delete``. A confirmed track is also deleted when its
     score falls ``delete_drop_from_peak`` below its peak, or when it has had no detection for
@@ -348,7 +351,12 @@ class TrackManagementConfig:
         " from each sensor's detections that no confirmed track took (clutter_density is then"
         " the prior)",
     )
-    new_target_density: float = _field(1e-7, "new-target density per m² per scan", gt=0, le=1.0)
+    new_target_density: float = _field(
+        1e-7,
+        "new-target density per m² per scan (at least a hundredth of the false-alarm density)",
+        gt=0,
+        le=1.0,
+    )
     p_false_confirm: float = _field(1e-5, "α: probability of confirming a false track", gt=0, lt=1)
     p_true_delete: float = _field(1e-3, "β: probability of deleting a true track", gt=0, lt=1)
     delete_drop_from_peak: float = _field(

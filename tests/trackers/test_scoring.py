@@ -4,11 +4,30 @@ import numpy as np
 import pytest
 
 from trackers.config import TrackManagementConfig
-from trackers.scoring import hit_increment, initial_score, miss_increment, sequential_test
+from trackers.scoring import (
+    MIN_NEW_TARGET_ODDS,
+    hit_increment,
+    initial_score,
+    initial_score_each,
+    miss_increment,
+    sequential_test,
+)
 
 
 def test_initial_score_is_log_density_ratio():
     assert initial_score(1e-7, 1e-6) == pytest.approx(math.log(0.1))
+
+
+def test_initial_score_never_starts_a_track_at_odds_below_the_floor():
+    """λ_nt counts as max(λ_nt, κ λ_fa): a radar's 1e-7 against a camera's 5.6e-4 false
+    alarms per m² (ln ratio −8.6, below the deletion threshold ln 1e-3) starts at ln κ."""
+    assert MIN_NEW_TARGET_ODDS == 0.01
+    assert initial_score(1e-7, 5.6e-4) == pytest.approx(math.log(0.01))
+    assert initial_score(1e-7, 1e-5) == pytest.approx(math.log(0.01))  # exactly at the floor
+    assert initial_score(1e-7, 2e-5) == pytest.approx(math.log(0.01))
+    assert initial_score(1e-7, 5e-6) == pytest.approx(math.log(0.02))  # above it: unchanged
+    each = initial_score_each(1e-7, np.array([1e-9, 1e-6, 1e-3]))
+    np.testing.assert_allclose(each, [math.log(100.0), math.log(0.1), math.log(0.01)])
 
 
 def test_hit_increment_worked_example():
