@@ -325,8 +325,9 @@ class TrackManagementConfig:
     with ``clutter_map`` the density of a scan that carries none is learned per area
     (:mod:`trackers.clutter`), ``clutter_density`` its prior.
     ``new_target_density`` is λ_nt per m² per scan; a new track starts at
-    ``ln(λ_nt / λ_fa)``, but never below ``ln 0.01`` (λ_nt counts as at least a hundredth of
-    the false-alarm density where that is dense: :data:`trackers.scoring.MIN_NEW_TARGET_ODDS`).
+    ``ln(λ_nt / λ_fa)``, but never below ``ln 0.01``: λ_nt counts as at least a hundredth of
+    the false-alarm density, which matters where that is dense (a camera's false alarms,
+    :data:`trackers.scoring.MIN_NEW_TARGET_ODDS`).
     The confirmation threshold is
     ``ln((1 − β)/α)`` and the deletion threshold ``ln(β/(1 − α))`` with α =
     ``p_false_confirm`` and β = ``p_true_delete``. A confirmed track is also deleted when its
