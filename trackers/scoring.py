@@ -46,8 +46,9 @@ _MIN_MISS_PROBABILITY = 1e-12
 #: and ``ln(λ_nt / λ_fa)`` of −8 to −9 started every track below the deletion threshold
 #: (``ln β`` ≈ −6.9), where a learned density that rose with a group's first detections
 #: stopped every start (a newcomer's plaza: a group of 4 people 1 m apart had four tracks in
-#: 26 % of its frames). With κ = 0.01 a new track starts at ``ln κ`` ≈ −4.6 or above, a miss
-#: at P_D 0.9 (``ln 0.1``) short of that threshold.
+#: 26 % of its frames); a radar that stated 1e-4 per m² never confirmed a target. With
+#: κ = 0.01 a new track starts at ``ln κ`` ≈ −4.6 or above, a miss at P_D 0.9 (``ln 0.1``)
+#: short of that threshold.
 MIN_NEW_TARGET_ODDS = 0.01
 _LOG_MIN_ODDS = math.log(MIN_NEW_TARGET_ODDS)
 

@@ -438,3 +438,40 @@ def test_people_walking_in_side_by_side_each_get_a_track(seed: int) -> None:
     without the floor on the new-target odds (trackers.scoring.MIN_NEW_TARGET_ODDS), all but
     a few frames with it."""
     assert _group_held(seed) >= 0.9
+
+
+def _dense_stated(seed: int, scans: int = 120) -> tuple[float, float]:
+    """A radar every 2.5 s (10 m noise, P_D 0.9) over 1 km x 1 km with 100 false alarms a
+    scan, the density stated (1e-4 per m²), and 3 targets at 5-9 m/s: the share of the
+    target-scans after the first 20 scans held by a confirmed track within 50 m, and the
+    confirmed tracks a scan more than 50 m from every target."""
+    rng = np.random.default_rng(seed)
+    pipe = TrackingPipeline(TrackerConfig())
+    x0 = np.array([[200.0, 300.0], [-300.0, -100.0], [0.0, 400.0]])
+    v = np.array([[5.0, 2.0], [-3.0, 6.0], [8.0, -4.0]])
+    false = held = n = 0
+    for k in range(scans):
+        t = 2.5 * k
+        X = x0 + v * t
+        det = X[rng.random(3) < 0.9]
+        z = np.vstack(
+            [det + rng.normal(0, 10, det.shape), rng.uniform(-500, 500, (rng.poisson(100), 2))]
+        )
+        res = pipe.process(Scan("r", t, z, _R(len(z), 10.0), clutter_density=1e-4))
+        if k >= 20:
+            P = np.array([c.position for c in res.confirmed()]).reshape(-1, 2)
+            if len(P):
+                d = np.hypot(X[:, None, 0] - P[None, :, 0], X[:, None, 1] - P[None, :, 1])
+                false += int((d.min(axis=0) > 50).sum())
+                held += int((d.min(axis=1) <= 50).sum())
+            n += 1
+    return held / (3 * n), false / n
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_targets_in_dense_stated_clutter_get_tracks(seed: int) -> None:
+    """ln(λ_nt / λ_fa) = ln(1e-7 / 1e-4) is the deletion threshold itself: without the floor
+    on the new-target odds no target of these runs (6 seeds) was ever confirmed; with it they
+    are held in 0.76-0.92 of their scans, and no false track is confirmed."""
+    held, false = _dense_stated(seed)
+    assert held >= 0.6 and false == 0.0
