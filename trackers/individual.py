@@ -16,7 +16,8 @@ One step, for a scan at time t with detections z_j (covariances R_j):
    by default (``two_point``, :mod:`trackers.initiation`) the candidates of earlier scans
    pair with them, and with those a tentative track took when the pair scores higher, each
    pair kept starting a tentative track; each free detection becomes a candidate. With
-   ``single_point`` each free detection starts a tentative track scored L(1) = ln(λ_nt/λ_fa);
+   ``single_point`` each free detection starts a tentative track scored
+   L(1) = max(ln(λ_nt/λ_fa), ln κ) (:func:`trackers.scoring.initial_score`);
 7. confirmation and deletion by the sequential test (a track is confirmed once it holds
    detections of three instants at the earliest, :data:`MIN_CONFIRM_INSTANTS`), the
    drop-from-peak and coasting rules.
@@ -75,6 +76,7 @@ from trackers.scoring import (
     initial_score,
     initial_score_each,
     miss_increment,
+    new_target_odds_density,
     sequential_test,
 )
 from trackers.state import (
@@ -544,7 +546,9 @@ class IndividualTracker:
         tracked = newly & ~delete  # the winners that go on as a confirmed track
         if young.any():
             before = delete.copy()
-            tracks, young, delete = _relinked(tracks, young, delete, t, config, n_old)
+            tracks, young, delete = _relinked(
+                tracks, young, delete, t, config, n_old, _typical(lam_fa)
+            )
             tracked |= delete & ~before  # merged into the confirmed track they continue
             newly &= ~delete
         if losers.size:  # the likeliest sibling is tracked: the others were its other readings
@@ -1478,7 +1482,8 @@ def _typical(lam: float | np.ndarray) -> float:
 def _initial_scores(
     new_target_density: float, lam: float | np.ndarray, rows: np.ndarray
 ) -> np.ndarray:
-    """``L(1) = ln(λ_nt / λ_fa)`` of new candidates or tracks at the detections ``rows``."""
+    """``L(1) = max(ln(λ_nt / λ_fa), ln κ)`` (:func:`trackers.scoring.initial_score`) of new
+    candidates or tracks at the detections ``rows``."""
     if isinstance(lam, float):
         return np.full(rows.size, initial_score(new_target_density, lam))
     return initial_score_each(new_target_density, np.take(lam, rows))
@@ -1732,6 +1737,7 @@ def _relinked(
     t: float,
     config: TrackerConfig,
     n_old: int,
+    clutter_density: float,
 ) -> tuple[TrackArrays, np.ndarray, np.ndarray]:
     """Young tracks (``young``: tentative ones with detections of at least 3 instants that
     are confirmed at this scan or score 0 or more) that continue a confirmed track which lost
@@ -1751,12 +1757,14 @@ def _relinked(
         eᵀ S⁻¹ e ≤ γ,   N(e; 0, S) ≥ λ_nt,
         |a| ≤ min(a_max, max(a_0, ω_max max(|v_o|, |v_n|))),
 
-    with ``p̂_o = p_o + v_o Δt`` the old track's prediction to ``t`` (its covariance grown by
-    the coasting), ``λ_nt`` the new-target density (a vague old track, long lost, loses to
-    a new target), ``a_max`` and ``ω_max`` the manoeuvre search's bounds and ``a_0`` =
-    :data:`RELINK_MIN_ACCELERATION`. The likeliest pairs (highest ``N(e; 0, S)``) are
-    merged first, each track at most once. A target that set off from a hover, braked hard
-    or turned out of its track's gate was otherwise seen by a second track while the first
+    with ``p̂_o = p_o + v_o Δt`` the old track's prediction to ``t`` (its covariance grown
+    by the coasting), ``λ_nt`` the new-target density in force against the scan's typical
+    false-alarm density ``clutter_density``
+    (:func:`trackers.scoring.new_target_odds_density`; a vague old track, long lost, loses
+    to a new target), ``a_max`` and ``ω_max`` the manoeuvre search's bounds and ``a_0`` =
+    :data:`RELINK_MIN_ACCELERATION`. The likeliest pairs (highest ``N(e; 0, S)``) are merged
+    first, each track at most once. A target that set off from a hover, braked hard or
+    turned out of its track's gate was otherwise seen by a second track while the first
     coasted on beside it, then deleted: the target changed id. A young track that is not
     confirmed yet must score 0 or more: in dense clutter three false alarms in a row fit a
     coasting track's wide prediction now and then."""
@@ -1768,6 +1776,7 @@ def _relinked(
         return tracks, young, delete
     gating = config.gating
     gamma = gating.threshold
+    nt_density = config.track_management.new_target_density
     xn, Pn = tracks.x_comb[new], tracks.P_comb[new]
     xo, Po = tracks.x_comb[old], tracks.P_comb[old]
     dt = t - tracks.updated[old]
@@ -1811,7 +1820,7 @@ def _relinked(
     fits = (
         (det > 0.0)
         & (m <= gamma)
-        & (cost <= -math.log(config.track_management.new_target_density))
+        & (cost <= -math.log(new_target_odds_density(nt_density, clutter_density)))
         & (np.hypot(dv[:, 0], dv[:, 1]) <= a_bound[ni, oj] * dt[oj])
     )
     if not fits.any():

@@ -1,7 +1,8 @@
 """Track initiation: velocity-gated two-point initiation (Blackman and Popoli, 1999, ch. 6).
 
 A detection that no track explains opens a *candidate*: a position ``z_c`` with covariance
-``R_c`` at time ``t_c`` and the score of a one-detection track, ``L₁ = ln(λ_nt / λ_fa)``.
+``R_c`` at time ``t_c`` and the score of a one-detection track,
+``L₁ = max(ln(λ_nt / λ_fa), ln κ)`` (:func:`trackers.scoring.initial_score`).
 At each later scan, within ``candidate_max_age`` seconds, the candidate is paired with the free
 detections ``z_j`` (covariance ``R_j``) whose displacement ``d = z_j − z_c`` a target of speed
 at most ``v_max`` could make in ``Δt = t − t_c``:

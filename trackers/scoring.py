@@ -4,7 +4,7 @@ Blackman and Popoli (1999, ch. 6) and paper 002 (eqs. 27-30): a track's score is
 the ratio of the likelihood that its detections come from one target to the likelihood that
 they are false alarms. Starting from one detection,
 
-    L(1) = ln(λ_nt / λ_fa),
+    L(1) = ln(max(λ_nt, κ λ_fa) / λ_fa)     (κ = MIN_NEW_TARGET_ODDS, 0.01),
 
 and at each later scan
 
@@ -32,6 +32,7 @@ __all__ = [
     "initial_score",
     "initial_score_each",
     "miss_increment",
+    "new_target_odds_density",
     "sequential_test",
 ]
 
@@ -53,10 +54,16 @@ MIN_NEW_TARGET_ODDS = 0.01
 _LOG_MIN_ODDS = math.log(MIN_NEW_TARGET_ODDS)
 
 
+def new_target_odds_density(new_target_density: float, clutter_density: float) -> float:
+    """The new-target density in force against false alarms of ``clutter_density``:
+    ``max(λ_nt, κ λ_fa)``, κ :data:`MIN_NEW_TARGET_ODDS`."""
+    return max(new_target_density, MIN_NEW_TARGET_ODDS * clutter_density)
+
+
 def initial_score(new_target_density: float, clutter_density: float) -> float:
     """``L(1) = ln(max(λ_nt, κ λ_fa) / λ_fa) = max(ln(λ_nt / λ_fa), ln κ)``, κ
     :data:`MIN_NEW_TARGET_ODDS`."""
-    return max(math.log(new_target_density) - math.log(clutter_density), _LOG_MIN_ODDS)
+    return float(max(np.log(new_target_density) - np.log(clutter_density), _LOG_MIN_ODDS))
 
 
 def initial_score_each(new_target_density: float, clutter_density: np.ndarray) -> np.ndarray:

@@ -10,6 +10,7 @@ from trackers.scoring import (
     initial_score,
     initial_score_each,
     miss_increment,
+    new_target_odds_density,
     sequential_test,
 )
 
@@ -28,6 +29,9 @@ def test_initial_score_never_starts_a_track_at_odds_below_the_floor():
     assert initial_score(1e-7, 5e-6) == pytest.approx(math.log(0.02))  # above it: unchanged
     each = initial_score_each(1e-7, np.array([1e-9, 1e-6, 1e-3]))
     np.testing.assert_allclose(each, [math.log(100.0), math.log(0.1), math.log(0.01)])
+    # the density in force, which the relink test of young tracks compares against too
+    assert new_target_odds_density(1e-7, 1e-6) == 1e-7
+    assert new_target_odds_density(1e-7, 5.6e-4) == pytest.approx(5.6e-6)
 
 
 def test_hit_increment_worked_example():
