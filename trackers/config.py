@@ -471,7 +471,11 @@ class ExtendedConfig:
         3, "fewest detections of a cluster that may start a track", ge=2, le=1000
     )
     birth_scans: int = _field(
-        3, "scans in a row a cluster must be seen to start a track", ge=1, le=100
+        3,
+        "scans in a row a cluster must be seen to start a track (after which one scan may"
+        " miss it, once)",
+        ge=1,
+        le=100,
     )
     birth_time: float = _field(
         10.0,

@@ -381,11 +381,13 @@ def test_a_clutter_patch_is_learned_through_the_tracks_it_starts(monkeypatch) ->
     """The tracks a patch of clutter starts took its detections, so the map never learned it
     and confirmed more: with the detections of the tentative tracks the test deletes counted,
     about a third as many false tracks (8 runs: 3.0 a scan without, 1.1 with; single runs
-    range from 0 to 7, so 4 runs, as this test had, gave a fifth or half by chance)."""
+    range from 0 to 7, so 4 runs, as this test had, gave a fifth or half by chance). Since a
+    birth run may miss a scan, extended tracks hold more of the patch: summed over the 8
+    runs, 27.9 without and 6.8 with before, 10.2 and 2.4 now."""
     with_late = sum(_patch_false_tracks(s) for s in range(8))
     monkeypatch.setattr(ClutterMap, "settle", lambda self, accepted, rejected: None)
     without = sum(_patch_false_tracks(s) for s in range(8))
-    assert without > 12.0 and with_late < 0.45 * without
+    assert without > 6.0 and with_late < 0.45 * without
 
 
 def test_a_restored_state_forgets_the_held_detections() -> None:

@@ -71,6 +71,7 @@ class ExtendedCheckpoint:
         arrays["candidates.seen"] = np.array([c.seen for c in cands], dtype=np.int64)
         arrays["candidates.sums"] = np.array([c.sums for c in cands], dtype=float).reshape(k, 7)
         put_strings(arrays, "candidates.sensors", [c.sensor for c in cands])
+        arrays["candidates.missed"] = np.array([c.missed for c in cands], dtype=np.int64)
         put_strings(arrays, "absorbing.ids", [tid for tid, _ in st.absorbing])
         put_strings(arrays, "noise.sensors", [e[0] for e in st.noise])
         arrays["noise.sigma"] = np.array([e[1] for e in st.noise], dtype=float)
@@ -106,7 +107,7 @@ _TRACK_INTS = ("hits", "split_evidence", "shed_evidence")
 def read_state(section: StateSection, base: _State, id_prefix: str = "") -> _State:
     """The state a section of :meth:`ExtendedCheckpoint.export` holds, checked, under the
     configuration of ``base`` (kept as it is); :class:`StateError` naming the field."""
-    from trackers.extended.tracker import ExtendedTrack, _Candidate
+    from trackers.extended.tracker import RUN_MISSES, ExtendedTrack, _Candidate
 
     r = SectionReader(section, "peer/extended")
     t = r.time("time")
@@ -137,6 +138,12 @@ def read_state(section: StateSection, base: _State, id_prefix: str = "") -> _Sta
     c_sensors = [""] * k
     if r.has("candidates.sensors.len"):
         c_sensors = [s or "" for s in r.strings("candidates.sensors", k)]
+    # files written before runs could miss a scan: none missed
+    c_missed = (
+        r.integers("candidates.missed", (k,), ge=0).tolist()
+        if r.has("candidates.missed")
+        else [0] * k
+    )
     absorbing_ids = [s or "" for s in r.strings("absorbing.ids", a)]
     absorbing_scans = r.integers("absorbing.scans", (a,), ge=0)
     noise: tuple[tuple[str, float, float], ...] = ()
@@ -211,6 +218,7 @@ def read_state(section: StateSection, base: _State, id_prefix: str = "") -> _Sta
             int(c_seen[j]),
             tuple(float(v) for v in c_sums[j]),  # type: ignore[arg-type]
             c_sensors[j],
+            min(int(c_missed[j]), RUN_MISSES),
         )
         for j in range(k)
     )

@@ -36,13 +36,16 @@ Each scan (:meth:`ExtendedTracker.propose`, then :meth:`~ExtendedTracker.commit`
    one or two detections and at least as many tracks is as many targets (cars 50 m apart in
    a lane, or side by side in two lanes); more detections than tracks, or more than two
    strung together gate to gate, are an object's returns (a ship's). A cluster of at least
-   ``min_detections`` such detections, seen in ``birth_scans`` scans in a row spanning at
-   least ``birth_time`` seconds and moving at no more than ``max_speed``, starts a tentative
+   ``min_detections`` such detections, seen in ``birth_scans`` scans in a row (then one
+   scan of its sensor may miss it, once: :data:`RUN_MISSES`) spanning at least
+   ``birth_time`` seconds and moving at no more than ``max_speed``, starts a tentative
    extended track with those of them that are explained by no confirmed individual track or
    by confirmed tracks moving together (with each other and with the cluster's run), less
    those of targets being acquired (tracks of ``ESTABLISHED_HITS`` detections, confirmed or
    not, that explain them one to one: alone with a detection, two side by side, or rivals
-   of one start).
+   of one start). Its velocity is the slope of the run's centroids, weighed with the mean
+   velocity of the confirmed individual tracks in the cluster that move together, if any
+   (:func:`_birth_velocity`).
 
 Tracks can also be started by hand (:meth:`ExtendedTracker.start`), from a centroid,
 velocity and extent prior; such a track is confirmed at once.
@@ -123,6 +126,15 @@ BIRTH_VELOCITY_STD = 5.0
 #: few detections over one scan.
 SPLIT_VELOCITY_STD = 10.0
 
+
+#: Scans of its sensor that may miss a birth run, once seen in ``birth_scans`` scans, without
+#: ending it. An object whose returns come and go (a ship whose scatterers a radar resolves,
+#: some held by confirmed individual tracks that explain them one to one) leaves fewer than
+#: ``min_detections`` free detections in one scan of three or four: at T = 2.5 s a run
+#: needs 5 scans to span ``birth_time``, and a run that any such scan ended rarely did (a
+#: newcomer's 300 m ship seen end-on showed 4-5 individual tracks and no extended one for
+#: 400 s). Only established runs: uniform clutter's runs of one or two scans end as before.
+RUN_MISSES = 1
 
 #: A sensor's position noise counts for the resolution distance this long (s) after its last
 #: batch ...
@@ -215,7 +227,8 @@ class ExtendedTrack:
 
 
 class _Candidate(NamedTuple):
-    """A cluster seen in consecutive scans, not yet a track: its latest centroid, and the
+    """A cluster seen in consecutive scans (but for one, once seen ``birth_scans`` times:
+    :meth:`missed_by`), not yet a track: its latest centroid, and the
     sums for the least-squares line ``c(t) = a + v (t − t₀)`` through its centroids (a
     cluster of clutter jitters by tens of metres a scan: a velocity from two centroids would
     be off by tens of m/s). A tuple of plain floats: a scan makes and drops many of these.
@@ -232,6 +245,8 @@ class _Candidate(NamedTuple):
     sums: tuple[float, float, float, float, float, float, float]
     #: The sensor whose scan saw it last ("": not known, a file of an earlier version).
     sensor: str = ""
+    #: Scans of its sensor that did not see it since it began (at most RUN_MISSES).
+    missed: int = 0
 
     @classmethod
     def first(cls, centroid: tuple[float, float], t: float, sensor: str = "") -> _Candidate:
@@ -243,12 +258,23 @@ class _Candidate(NamedTuple):
         cx, cy = centroid
         tau = t - self.first_time
         sums = (n + 1.0, s1 + tau, s2 + tau * tau, sx + cx, sy + cy, tx + tau * cx, ty + tau * cy)
-        return _Candidate((cx, cy), self.first_time, t, self.seen + 1, sums, sensor)
+        return _Candidate((cx, cy), self.first_time, t, self.seen + 1, sums, sensor, self.missed)
 
     def broken_by(self, sensor: str) -> bool:
-        """Whether a scan of ``sensor`` that does not see the run ends it: a scan of the
-        sensor that saw it last (or of any, when that is not known)."""
+        """Whether a scan of ``sensor`` that does not see the run counts as a miss of it: a
+        scan of the sensor that saw it last (or of any, when that is not known)."""
         return not self.sensor or self.sensor == sensor
+
+    def missed_by(self, sensor: str, established: int) -> _Candidate | None:
+        """The run after a scan of ``sensor`` that did not see it: unchanged for another
+        sensor's scan; for its own, ``None`` (ended), but a run seen ``established`` times
+        (``birth_scans``: it waits for ``birth_time`` only) may miss :data:`RUN_MISSES`
+        of them."""
+        if not self.broken_by(sensor):
+            return self
+        if self.seen < established or self.missed >= RUN_MISSES:
+            return None
+        return self._replace(missed=self.missed + 1)
 
     @property
     def velocity(self) -> np.ndarray:
@@ -486,6 +512,10 @@ class _PointGates:
     @property
     def Pp(self) -> np.ndarray:
         return self._P[:, :2, :2]
+
+    @property
+    def Pv(self) -> np.ndarray:
+        return self._P[:, 2:4, 2:4]
 
     @cached_property
     def created(self) -> np.ndarray:
@@ -981,12 +1011,7 @@ class ExtendedTracker(SavesImmutableState):
                 subsets, scan, scan.clutter_scene if stated is None else float(stated), sigma
             )
         clusters = subsets
-        centroids: list[tuple[float, float]] = []
-        if clusters:  # every cluster's mean at once: sums over the clusters' runs of rows
-            sizes = [rows.size for rows in clusters]
-            starts = list(itertools.accumulate(sizes[:-1], initial=0))
-            sums = np.add.reduceat(scan.z.take(np.concatenate(clusters), axis=0), starts, axis=0)
-            centroids = [(x / n, y / n) for (x, y), n in zip(sums.tolist(), sizes, strict=True)]
+        centroids = _centroids(scan, clusters)
         # Each cluster's run: the candidate it continues (nearest to its prediction).
         match: list[_Candidate | None] = [None] * len(clusters)
         candidates: list[_Candidate] = []
@@ -998,8 +1023,8 @@ class ExtendedTracker(SavesImmutableState):
                 continue
             px, py = cand.predicted(t)
             if not clusters:
-                if not cand.broken_by(scan.sensor_id):
-                    candidates.append(cand)
+                if (kept_run := cand.missed_by(scan.sensor_id, cfg.birth_scans)) is not None:
+                    candidates.append(kept_run)
                 continue
             reach = cfg.resolution_distance + (
                 cfg.max_speed * dt if cand.seen == 1 else 2.0 * cfg.group_speed_spread * dt
@@ -1011,8 +1036,8 @@ class ExtendedTracker(SavesImmutableState):
                     best, best_d = k, d
             if best >= 0:
                 match[best] = cand
-            elif not cand.broken_by(scan.sensor_id):  # another sensor's miss: it goes on
-                candidates.append(cand)
+            elif (kept_run := cand.missed_by(scan.sensor_id, cfg.birth_scans)) is not None:
+                candidates.append(kept_run)  # another sensor's miss, or its one allowed
         born: list[tuple[ExtendedTrack, np.ndarray]] = []
         ripe: list[tuple[np.ndarray, _Candidate]] = []
         for k, centroid in enumerate(centroids):
@@ -1037,30 +1062,94 @@ class ExtendedTracker(SavesImmutableState):
             np.array([run.velocity_std(0.5 * cfg.resolution_distance) for _, run in ripe]),
         )
         kept = _group_clusters([rows for rows, _ in ripe], point_gates(), cfg, since, moving)
+        members = [_members_velocity(rows, point_gates(), cfg) for rows in kept]
         kept = _not_acquiring(kept, view, scan)
-        for rows, (_, run) in zip(kept, ripe, strict=True):
+        for rows, (_, run), held in zip(kept, ripe, members, strict=True):
             if rows.size < cfg.min_detections:
                 candidates.append(_Candidate.first(run.centroid, t, scan.sensor_id))
                 continue
+            velocity, velocity_std = _birth_velocity(
+                run.velocity, run.velocity_std(0.5 * cfg.resolution_distance), held
+            )
             track = _born(
                 f"{self.id_prefix}E{next_id}",
                 scan,
                 rows,
-                run.velocity,
+                velocity,
                 False,
                 initial_score(tm.new_target_density, tm.clutter_density),
                 float(rows.size),
                 cfg,
                 tm,
-                velocity_std=min(
-                    cfg.max_speed,
-                    max(BIRTH_VELOCITY_STD, run.velocity_std(0.5 * cfg.resolution_distance)),
-                ),
+                velocity_std=min(cfg.max_speed, max(BIRTH_VELOCITY_STD, velocity_std)),
                 origin=run.first_time,
             )
             born.append((track, rows))
             next_id += 1
         return born, tuple(candidates), next_id
+
+
+def _centroids(scan: Scan, clusters: list[np.ndarray]) -> list[tuple[float, float]]:
+    """The mean of each cluster's detections (rows of ``scan``), all at once: sums over the
+    clusters' runs of rows."""
+    if not clusters:
+        return []
+    sizes = [rows.size for rows in clusters]
+    starts = list(itertools.accumulate(sizes[:-1], initial=0))
+    sums = np.add.reduceat(scan.z.take(np.concatenate(clusters), axis=0), starts, axis=0)
+    return [(x / n, y / n) for (x, y), n in zip(sums.tolist(), sizes, strict=True)]
+
+
+def _members_velocity(
+    rows: np.ndarray, pg: _PointGates, cfg: ExtendedConfig
+) -> tuple[np.ndarray, float] | None:
+    """The velocity of a cluster (detections ``rows`` of the scan) that the confirmed
+    individual tracks in it show, and its standard deviation per axis: the mean ``v̄`` of the
+    velocities ``vᵢ`` of the tracks with one of the cluster's detections in their gate that
+    move together (within ``group_speed_spread`` of their median), two at least, with
+
+        σ² = max(s², σ̄²) / n,    s² = Σ‖vᵢ − v̄‖² / (2 (n − 1)),    σ̄² = mean of tr(P_vᵢ) / 2,
+
+    (the scatter of the tracks' velocities, or their own uncertainty if that is larger,
+    over the ``n`` tracks); ``None`` without two such tracks. A ship's scatterers that a
+    radar resolves are held by individual tracks before the ship's track starts: their
+    velocities are noisy, but far less so than the slope of the cluster's centroid, which
+    jumps along the hull with whichever scatterers a scan shows."""
+    if pg.det.size == 0 or rows.size == 0:
+        return None
+    mine = np.zeros(pg.size, dtype=bool)
+    mine[rows] = True
+    trk = np.unique(pg.trk[mine[pg.det]])
+    if trk.size < 2:
+        return None
+    v = np.take(pg.v, trk, axis=0)
+    together = np.hypot(*(v - np.median(v, axis=0)).T) <= cfg.group_speed_spread
+    n = int(together.sum())
+    if n < 2:
+        return None
+    v = v[together]
+    mean = v.mean(axis=0)
+    scatter = float(np.sum((v - mean) ** 2)) / (2.0 * (n - 1))
+    Pv = np.take(pg.Pv, trk[together], axis=0)
+    own = float(np.mean(Pv[:, 0, 0] + Pv[:, 1, 1])) / 2.0
+    return mean, math.sqrt(max(scatter, own) / n)
+
+
+def _birth_velocity(
+    slope: np.ndarray, slope_std: float, members: tuple[np.ndarray, float] | None
+) -> tuple[np.ndarray, float]:
+    """A new extended track's velocity and its standard deviation per axis: the slope of its
+    cluster's centroids (std ``slope_std``), combined with the velocity its confirmed
+    individual tracks show (:func:`_members_velocity`), if any, by inverse variances:
+
+        v = (σ_m² v_c + σ_c² v_m) / (σ_c² + σ_m²),    σ² = σ_c² σ_m² / (σ_c² + σ_m²)."""
+    if members is None:
+        return slope, slope_std
+    v_m, s_m = members
+    if not math.isfinite(slope_std):
+        return v_m, s_m
+    a, b = slope_std**2, s_m**2
+    return (b * slope + a * v_m) / (a + b), math.sqrt(a * b / (a + b))
 
 
 #: A tentative track of this many detections is a target being acquired: a birth leaves its
