@@ -53,6 +53,11 @@ LEARN_SCANS = 32
 #: deviations of the largest detection noise of those scans.
 LEARN_GROWTH = 0.1
 LEARN_SIGMAS = 3.0
+#: A learned range (the farthest detection of those scans from the sensor) is grown by this
+#: fraction, and by LEARN_SIGMAS standard deviations: 32 scans of a radar's false alarms put
+#: the farthest well within 1 % of its range, a sparser sensor's short of it (its scans then
+#: miss no track beyond: the cautious side).
+LEARN_RANGE_GROWTH = 0.02
 #: Point-in-polygon tests are done in blocks of at most this many points x vertices.
 CHUNK_CELLS = 1 << 18
 #: The most sensors remembered; beyond, the least recently heard is forgotten.
@@ -140,10 +145,23 @@ class Coverage:
             raise ValueError("coverage: a polygon, a max_range, or both")
 
     @staticmethod
-    def box(lo: np.ndarray, hi: np.ndarray, *, learned: bool = False) -> Coverage:
-        """The axis-aligned box from corner ``lo (2,)`` to corner ``hi (2,)``."""
+    def box(
+        lo: np.ndarray,
+        hi: np.ndarray,
+        *,
+        learned: bool = False,
+        centre: np.ndarray | None = None,
+        max_range: float | None = None,
+    ) -> Coverage:
+        """The axis-aligned box from corner ``lo (2,)`` to corner ``hi (2,)`` (cut to the
+        disc of ``max_range`` about ``centre``, if given)."""
         (x0, y0), (x1, y1) = np.asarray(lo, dtype=float), np.asarray(hi, dtype=float)
-        return Coverage(polygon=np.array([[x0, y0], [x1, y0], [x1, y1], [x0, y1]]), learned=learned)
+        return Coverage(
+            polygon=np.array([[x0, y0], [x1, y0], [x1, y1], [x0, y1]]),
+            centre=centre,
+            max_range=max_range,
+            learned=learned,
+        )
 
     def _in_range(
         self, points: np.ndarray, margin: float | np.ndarray, sign: float
@@ -314,7 +332,7 @@ def disc_fraction(coverage: Coverage, centre: np.ndarray, radius: np.ndarray) ->
 
 
 #: One scan's detections: their box ``(x0, y0, x1, y1)`` and largest noise σ (m), or None.
-Box = tuple[float, float, float, float, float] | None
+Box = tuple[float, float, float, float, float, float | None] | None
 #: What a :class:`CoverageLearner` knows, least recently heard sensor first: each sensor's id,
 #: when it was last heard and the boxes of its last :data:`LEARN_SCANS` scans.
 LearnerSnapshot = tuple[tuple[str, float, tuple[Box, ...]], ...]
@@ -334,44 +352,83 @@ class CoverageLearner:
         self._heard: OrderedDict[str, float] = OrderedDict()
 
     @staticmethod
-    def _box(z: np.ndarray, R: np.ndarray) -> tuple[float, float, float, float, float] | None:
+    def _box(z: np.ndarray, R: np.ndarray, position: np.ndarray | None = None) -> Box:
+        """A scan's box of detections, the largest noise standard deviation and the range of
+        its farthest detection from the sensor's ``position`` (``None`` when not given)."""
         if z.shape[0] == 0:
             return None
         lo, hi = z.min(axis=0), z.max(axis=0)
         # the largest eigenvalue's Gershgorin bound, var + |cov| (exact for a diagonal R)
         off = np.abs(R[:, 0, 1])
         var = max(float((R[:, 0, 0] + off).max()), float((R[:, 1, 1] + off).max()))
-        return float(lo[0]), float(lo[1]), float(hi[0]), float(hi[1]), math.sqrt(var)
+        reach = None
+        if position is not None:
+            d = z - np.asarray(position, dtype=float).reshape(1, 2)
+            reach = float(np.sqrt(np.max(d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1])))
+        return float(lo[0]), float(lo[1]), float(hi[0]), float(hi[1]), math.sqrt(var), reach
 
     def _several(self, sensor_id: str, t: float) -> bool:
         return any(
             sid != sensor_id and t - last <= FORGET_AFTER for sid, last in self._heard.items()
         )
 
-    def coverage(self, sensor_id: str, t: float, z: np.ndarray, R: np.ndarray) -> Coverage | None:
+    def coverage(
+        self,
+        sensor_id: str,
+        t: float,
+        z: np.ndarray,
+        R: np.ndarray,
+        position: np.ndarray | None = None,
+    ) -> Coverage | None:
         """The learned coverage of a scan of ``sensor_id`` at ``t`` with detections ``z``,
-        ``R``: ``None`` (everywhere) while no other sensor has been heard in the last
-        :data:`FORGET_AFTER` seconds; :meth:`Coverage.none` when neither it nor the sensor's
-        last :data:`LEARN_SCANS` scans hold a detection."""
+        ``R`` from a sensor at ``position`` (if given): ``None`` (everywhere) while no other
+        sensor has been heard in the last :data:`FORGET_AFTER` seconds;
+        :meth:`Coverage.none` when neither it nor the sensor's last :data:`LEARN_SCANS`
+        scans hold a detection. When every one of those scans with a detection gave the
+        sensor's position, the box is cut to the disc about it of radius
+
+            r = (1 + LEARN_RANGE_GROWTH) r_max + LEARN_SIGMAS σ,
+
+        ``r_max`` the farthest detection's range (from the sensor's position at its scan):
+        a radar's box reaches 41 % beyond its range at the corners, where another radar's
+        targets would be missed at each of its scans."""
         if not self._several(sensor_id, t):
             return None
         boxes = [b for b in self._boxes.get(sensor_id, ()) if b is not None]
-        now = self._box(z, R)
+        now = self._box(z, R, position)
         if now is not None:
             boxes.append(now)
         if not boxes:
             return Coverage.none(learned=True)
-        b = np.array(boxes)
+        b = np.array([box[:5] for box in boxes])
         lo, hi = b[:, 0:2].min(axis=0), b[:, 2:4].max(axis=0)
-        grow = LEARN_GROWTH * float(np.hypot(*(hi - lo))) + LEARN_SIGMAS * float(b[:, 4].max())
-        return Coverage.box(lo - grow, hi + grow, learned=True)
+        sigma = float(b[:, 4].max())
+        grow = LEARN_GROWTH * float(np.hypot(*(hi - lo))) + LEARN_SIGMAS * sigma
+        reaches = [box[5] for box in boxes if box[5] is not None]
+        if position is None or len(reaches) < len(boxes):
+            return Coverage.box(lo - grow, hi + grow, learned=True)
+        r = (1.0 + LEARN_RANGE_GROWTH) * max(reaches) + LEARN_SIGMAS * sigma
+        return Coverage.box(
+            lo - grow,
+            hi + grow,
+            learned=True,
+            centre=np.asarray(position, dtype=float).reshape(2),
+            max_range=max(r, 1e-9),
+        )
 
-    def learn(self, sensor_id: str, t: float, z: np.ndarray, R: np.ndarray) -> None:
-        """Record a processed scan."""
+    def learn(
+        self,
+        sensor_id: str,
+        t: float,
+        z: np.ndarray,
+        R: np.ndarray,
+        position: np.ndarray | None = None,
+    ) -> None:
+        """Record a processed scan (``position``: its sensor's, if given)."""
         self._heard[sensor_id] = t
         self._heard.move_to_end(sensor_id)
         kept = self._boxes.get(sensor_id, ())[-(LEARN_SCANS - 1) :]
-        self._boxes[sensor_id] = (*kept, self._box(z, R))
+        self._boxes[sensor_id] = (*kept, self._box(z, R, position))
         while len(self._heard) > MAX_SENSORS:
             gone, _ = self._heard.popitem(last=False)
             self._boxes.pop(gone, None)
@@ -416,14 +473,36 @@ class CoverageLearner:
                 if b is None:
                     read.append(None)
                     continue
-                ok = isinstance(b, list) and len(b) == 5
+                # [x0, y0, x1, y1, sigma], and the range reached (or null) since 2026-11-27
+                ok = isinstance(b, list) and len(b) in (5, 6)
                 ok = ok and all(
                     isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v)
-                    for v in b
+                    for v in b[:5]
+                )
+                reach = b[5] if ok and len(b) == 6 else None
+                ok = ok and (
+                    reach is None
+                    or (
+                        isinstance(reach, int | float)
+                        and not isinstance(reach, bool)
+                        and math.isfinite(reach)
+                        and reach >= 0
+                    )
                 )
                 if not ok or b[0] > b[2] or b[1] > b[3] or b[4] < 0:
-                    raise ValueError(f"{where}.boxes: [x0, y0, x1, y1, sigma] or null each")
-                read.append((float(b[0]), float(b[1]), float(b[2]), float(b[3]), float(b[4])))
+                    raise ValueError(
+                        f"{where}.boxes: [x0, y0, x1, y1, sigma, range or null] or null each"
+                    )
+                read.append(
+                    (
+                        float(b[0]),
+                        float(b[1]),
+                        float(b[2]),
+                        float(b[3]),
+                        float(b[4]),
+                        None if reach is None else float(reach),
+                    )
+                )
             if entry["id"] in out._heard:
                 raise ValueError(f"{where}.id: {entry['id']!r} twice")
             out._heard[entry["id"]] = float(t)

@@ -317,10 +317,13 @@ class TrackingPipeline:
         self._last_time = scan.time
         self._hand_in.clear()
         self._hand_over.clear()
-        self._coverage.learn(scan.sensor_id, scan.time, scan.z, scan.R)
-        # A batch with a coverage of its own (a sector of a revolution) or none detection (a
-        # heartbeat) would count as a look at every cell: the map learns from the others.
-        if mapped and scan.coverage is None and scan.size:
+        self._coverage.learn(scan.sensor_id, scan.time, scan.z, scan.R, scan.sensor_position)
+        # A batch with a coverage polygon of its own (a sector of a revolution) or no
+        # detection (a heartbeat) would count as a look at every cell: the map learns from
+        # the others. A range alone (``max_range``) is a whole revolution: the cells beyond it
+        # never see a detection, and are never looked at by it either.
+        whole = scan.coverage is None or scan.coverage.polygon is None
+        if mapped and whole and scan.size:
             mask = point.clutter
             clutter = rows if mask is None else rows[np.asarray(mask, dtype=bool)]
             self._clutter.learn(scan.sensor_id, scan.z.take(clutter, axis=0), scan.R)
@@ -338,7 +341,9 @@ class TrackingPipeline:
         given = scan
         learned: dict[str, Any] = {}
         if scan.coverage is None:
-            coverage = self._coverage.coverage(scan.sensor_id, scan.time, scan.z, scan.R)
+            coverage = self._coverage.coverage(
+                scan.sensor_id, scan.time, scan.z, scan.R, scan.sensor_position
+            )
             if coverage is not None:
                 learned["coverage"] = coverage
         tm = self.point.config.track_management
