@@ -361,6 +361,12 @@ class ClutterMap:
             grid.add(keys, np.bincount(inverse.ravel(), weights=weights, minlength=keys.size))
             grid.total += float(weights.sum())
 
+    def forget(self, sensor_id: str) -> None:
+        """Start ``sensor_id``'s map afresh (what it looks at changed: the cells it no longer
+        looks at would otherwise be counted as looked at and empty)."""
+        if self._grids.pop(sensor_id, None) is not None:
+            self._drop_stale()
+
     def forget_held(self) -> None:
         """Drop every held-back detection (the tracks that held them are gone: a state
         restored)."""

@@ -12,8 +12,10 @@ When a scan states no coverage and more than one sensor reports, :class:`Coverag
 gives it the box that held its sensor's detections over its last :data:`LEARN_SCANS` scans
 (clutter included; empty scans count as scans), grown by a tenth of its diagonal and three
 standard deviations of the largest detection noise: a sensor is taken to look where it has
-been seeing things, and one that has seen nothing in that while to look nowhere. A lone
-sensor's scans cover everything, as before.
+been seeing things, and one that has seen nothing in that while to look nowhere. When those
+scans gave the sensor's position, the box is cut to the disc about it (its latest position)
+of the farthest detection's range, grown a little: a radar's box would reach 41 % beyond
+its range at the corners. A lone sensor's scans cover everything, as before.
 
 How much of a target's possible positions a scan looked at decides how much its silence
 says: :func:`visible_fraction` is the share of a Gaussian (a track's predicted position) and
@@ -331,7 +333,8 @@ def disc_fraction(coverage: Coverage, centre: np.ndarray, radius: np.ndarray) ->
     return out
 
 
-#: One scan's detections: their box ``(x0, y0, x1, y1)`` and largest noise σ (m), or None.
+#: One scan's detections: their box ``(x0, y0, x1, y1)``, largest noise σ (m) and the range of
+#: the farthest from the sensor's position (m; None when the scan gave none), or None.
 Box = tuple[float, float, float, float, float, float | None] | None
 #: What a :class:`CoverageLearner` knows, least recently heard sensor first: each sensor's id,
 #: when it was last heard and the boxes of its last :data:`LEARN_SCANS` scans.
@@ -350,6 +353,8 @@ class CoverageLearner:
         self._boxes: dict[str, tuple[Box, ...]] = {}
         #: when each sensor was last heard, least recently first
         self._heard: OrderedDict[str, float] = OrderedDict()
+        #: each sensor's position as its last scan that gave one gave it (not saved)
+        self._positions: dict[str, np.ndarray] = {}
 
     @staticmethod
     def _box(z: np.ndarray, R: np.ndarray, position: np.ndarray | None = None) -> Box:
@@ -364,7 +369,8 @@ class CoverageLearner:
         reach = None
         if position is not None:
             d = z - np.asarray(position, dtype=float).reshape(1, 2)
-            reach = float(np.sqrt(np.max(d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1])))
+            far = float(np.max(np.hypot(d[:, 0], d[:, 1])))
+            reach = far if math.isfinite(far) else None
         return float(lo[0]), float(lo[1]), float(hi[0]), float(hi[1]), math.sqrt(var), reach
 
     def _several(self, sensor_id: str, t: float) -> bool:
@@ -405,9 +411,11 @@ class CoverageLearner:
         sigma = float(b[:, 4].max())
         grow = LEARN_GROWTH * float(np.hypot(*(hi - lo))) + LEARN_SIGMAS * sigma
         reaches = [box[5] for box in boxes if box[5] is not None]
-        if position is None or len(reaches) < len(boxes):
+        if position is None:  # an empty batch that gives none: where the sensor last was
+            position = self._positions.get(sensor_id)
+        r = (1.0 + LEARN_RANGE_GROWTH) * max(reaches, default=0.0) + LEARN_SIGMAS * sigma
+        if position is None or len(reaches) < len(boxes) or not math.isfinite(r):
             return Coverage.box(lo - grow, hi + grow, learned=True)
-        r = (1.0 + LEARN_RANGE_GROWTH) * max(reaches) + LEARN_SIGMAS * sigma
         return Coverage.box(
             lo - grow,
             hi + grow,
@@ -429,13 +437,17 @@ class CoverageLearner:
         self._heard.move_to_end(sensor_id)
         kept = self._boxes.get(sensor_id, ())[-(LEARN_SCANS - 1) :]
         self._boxes[sensor_id] = (*kept, self._box(z, R, position))
+        if position is not None:
+            self._positions[sensor_id] = np.asarray(position, dtype=float).reshape(2).copy()
         while len(self._heard) > MAX_SENSORS:
             gone, _ = self._heard.popitem(last=False)
             self._boxes.pop(gone, None)
+            self._positions.pop(gone, None)
         stale = [sid for sid, last in self._heard.items() if t - last > FORGET_AFTER]
         for sid in stale:
             del self._heard[sid]
             self._boxes.pop(sid, None)
+            self._positions.pop(sid, None)
 
     def snapshot(self) -> LearnerSnapshot:
         """What the learner knows now, immutable (its boxes are shared, not copied)."""

@@ -23,6 +23,7 @@ from typing import Any
 
 import numpy as np
 
+from trackers.clutter import MAX_SENSORS as MAX_MAPPED_SENSORS
 from trackers.clutter import ClutterMap
 from trackers.config import TrackerConfig
 from trackers.coverage import CoverageLearner, LearnerSnapshot
@@ -115,7 +116,8 @@ def check_scan(scan: Scan, last_time: float | None) -> None:
     Checks: finite time within ``±MAX_ABS_TIME`` not older than ``last_time``; finite
     positions with ``|x|, |y| ≤ MAX_ABS_POSITION``; symmetric positive definite covariances
     with entries ``≤ MAX_VARIANCE`` in magnitude; ``pd`` in (0, 1] and ``clutter_density``
-    > 0 when given; a finite ``sensor_position`` and ``sensor_velocity`` when given.
+    > 0 when given; a finite ``sensor_position`` (within ``±MAX_ABS_POSITION``) and
+    ``sensor_velocity`` when given.
     """
     if not math.isfinite(scan.time):
         raise ScanRejected("invalid_scan", "time: not a finite number")
@@ -148,6 +150,8 @@ def check_scan(scan: Scan, last_time: float | None) -> None:
         value = getattr(scan, name)
         if value is not None and not np.isfinite(value).all():
             raise ScanRejected("invalid_scan", f"{name}: not finite")
+    if scan.sensor_position is not None and np.abs(scan.sensor_position).max() > MAX_ABS_POSITION:
+        raise ScanRejected("invalid_scan", f"sensor_position: beyond ±{MAX_ABS_POSITION:g} m")
 
 
 def _check_magnitudes(z: np.ndarray, R: np.ndarray) -> None:
@@ -222,8 +226,10 @@ class TrackingPipeline:
         # scans after a restart).
         self._coverage = CoverageLearner()
         # The false-alarm density of each sensor's areas, for scans that state none (not
-        # saved either: it starts again from track_management.clutter_density).
+        # saved either: it starts again from track_management.clutter_density), and the
+        # disc each sensor's last mapped batch stated (max_range about its position, or None).
         self._clutter = ClutterMap()
+        self._discs: dict[str, tuple[float, float, float] | None] = {}
 
     @classmethod
     def all_kinds(
@@ -272,6 +278,7 @@ class TrackingPipeline:
         self._hand_over.clear()
         self._coverage = CoverageLearner()
         self._clutter = ClutterMap()
+        self._discs = {}
 
     # -- hand-over between trackers of neighbouring sectors ---------------------------------
 
@@ -308,6 +315,21 @@ class TrackingPipeline:
             hand_in=tuple(self._hand_in.values()),
         )
 
+    def _map_disc(self, scan: Scan) -> None:
+        """Start the sensor's clutter map afresh when the disc its batch states (``max_range``
+        about its position; none) is not the one of its last mapped batch."""
+        cov = scan.coverage
+        disc = (
+            None
+            if cov is None or cov.centre is None or cov.max_range is None
+            else (*cov.centre.tolist(), float(cov.max_range))
+        )
+        if scan.sensor_id in self._discs and self._discs[scan.sensor_id] != disc:
+            self._clutter.forget(scan.sensor_id)
+        self._discs[scan.sensor_id] = disc
+        while len(self._discs) > MAX_MAPPED_SENSORS:
+            self._discs.pop(next(iter(self._discs)))
+
     def _committed(self, scan: Scan, point: PointProposal, rows: np.ndarray, mapped: bool) -> None:
         """After every tracker has taken ``scan``: its time is the last, the hand-overs are
         done, and its detections say where its sensor looks and, when the scan was ``mapped``
@@ -320,10 +342,12 @@ class TrackingPipeline:
         self._coverage.learn(scan.sensor_id, scan.time, scan.z, scan.R, scan.sensor_position)
         # A batch with a coverage polygon of its own (a sector of a revolution) or no
         # detection (a heartbeat) would count as a look at every cell: the map learns from
-        # the others. A range alone (``max_range``) is a whole revolution: the cells beyond it
-        # never see a detection, and are never looked at by it either.
+        # the others. A range alone (``max_range``) is a whole revolution: its cells beyond
+        # the range never see a detection, and are never looked at either while the disc
+        # stays where it is; when it moves or changes, the sensor's map starts afresh.
         whole = scan.coverage is None or scan.coverage.polygon is None
         if mapped and whole and scan.size:
+            self._map_disc(scan)
             mask = point.clutter
             clutter = rows if mask is None else rows[np.asarray(mask, dtype=bool)]
             self._clutter.learn(scan.sensor_id, scan.z.take(clutter, axis=0), scan.R)

@@ -566,3 +566,50 @@ def test_a_target_beyond_a_radars_range_but_inside_its_box_is_held_by_the_other(
             held, per_scan = _beyond_a_radars_range(stated, seed)
             assert held >= 0.9, (stated, seed, held)
             assert per_scan < 2.0, (stated, seed, per_scan)
+
+
+def test_an_empty_batch_without_a_position_keeps_the_learned_range() -> None:
+    """A heartbeat (no detection) that gives no position is cut to the disc about where the
+    sensor last was, as the batches before it were (not the box, whose corners reach beyond
+    its range)."""
+    rng = np.random.default_rng(4)
+    learner = CoverageLearner()
+    learner.learn("b", 0.0, np.array([[300e3, 0.0]]), _R2(1, 100.0))
+    at = np.array([1000.0, -500.0])
+    for k in range(LEARN_SCANS):
+        z = _disc_clutter(rng, 30, at, 150e3)
+        learner.learn("a", 4.0 * k, z, _R2(len(z), 50.0), at)
+    empty = learner.coverage("a", 200.0, np.zeros((0, 2)), np.zeros((0, 2, 2)))
+    assert empty is not None and empty.max_range is not None
+    np.testing.assert_allclose(empty.centre, at)
+    assert empty.contains(np.array([[116e3, 114e3]])).tolist() == [False]
+
+
+def test_a_stated_range_teaches_the_clutter_map_until_it_changes() -> None:
+    """Batches stating only max_range teach the sensor's clutter map; one stating another
+    range (or position) starts it afresh: the cells it no longer looks at would be counted
+    as looked at and empty. A polygon (a sector) teaches it nothing, as before."""
+    rng = np.random.default_rng(6)
+
+    def batch(t: float, rmax: float, polygon: bool = False) -> Scan:
+        z = _disc_clutter(rng, 20, [0.0, 0.0], rmax)
+        cov = Coverage(
+            polygon=np.array([[-1e5, -1e5], [1e5, -1e5], [1e5, 1e5], [-1e5, 1e5]])
+            if polygon
+            else None,
+            centre=np.zeros(2),
+            max_range=rmax,
+        )
+        return Scan("r", t, z, _R2(len(z), 30.0), sensor_position=np.zeros(2), coverage=cov)
+
+    pipe = TrackingPipeline(TrackerConfig())
+    for k in range(10):
+        pipe.process(batch(4.0 * k, 20e3))
+    grid = pipe._clutter._grids.get("r")
+    assert grid is not None and grid.scans == 10
+    pipe.process(batch(40.0, 10e3))  # the range changed: a new map from this batch
+    assert pipe._clutter._grids["r"] is not grid and pipe._clutter._grids["r"].scans == 1
+    sector = TrackingPipeline(TrackerConfig())
+    for k in range(5):
+        sector.process(batch(4.0 * k, 20e3, polygon=True))
+    assert "r" not in sector._clutter._grids

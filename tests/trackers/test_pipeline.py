@@ -421,3 +421,16 @@ def test_a_reset_drops_the_tracks_and_the_time_and_ids_go_on() -> None:
     assert after and not after & before
     last = max(int(i[1:]) for i in before if i.startswith("T"))
     assert min(int(i[1:]) for i in after if i.startswith("T")) > last
+
+
+def test_a_sensor_position_beyond_the_position_bound_is_refused() -> None:
+    """Finite but absurd (1e200 m): its detections' range from it overflowed in the coverage
+    learner, whose saved state then failed to restore."""
+    z = np.array([[0.0, 0.0]])
+    scan = Scan("s", 0.0, z, np.eye(2)[None] * 100.0, sensor_position=np.array([1e200, 0.0]))
+    with pytest.raises(ScanRejected, match="sensor_position: beyond"):
+        check_scan(scan, None)
+    pipe = TrackingPipeline(TrackerConfig())
+    with pytest.raises(ScanRejected):
+        pipe.process(scan)
+    pipe.process(replace(scan, sensor_position=np.array([1e9, 0.0])))  # at the bound: taken

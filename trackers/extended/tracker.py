@@ -1062,8 +1062,11 @@ class ExtendedTracker(SavesImmutableState):
             np.array([run.velocity_std(0.5 * cfg.resolution_distance) for _, run in ripe]),
         )
         kept = _group_clusters([rows for rows, _ in ripe], point_gates(), cfg, since, moving)
-        members = [_members_velocity(rows, point_gates(), cfg) for rows in kept]
         kept = _not_acquiring(kept, view, scan)
+        members = [
+            _members_velocity(rows, point_gates(), cfg, run.first_time, run.velocity, sd)
+            for rows, (_, run), sd in zip(kept, ripe, moving[1].tolist(), strict=True)
+        ]
         for rows, (_, run), held in zip(kept, ripe, members, strict=True):
             if rows.size < cfg.min_detections:
                 candidates.append(_Candidate.first(run.centroid, t, scan.sensor_id))
@@ -1101,12 +1104,20 @@ def _centroids(scan: Scan, clusters: list[np.ndarray]) -> list[tuple[float, floa
 
 
 def _members_velocity(
-    rows: np.ndarray, pg: _PointGates, cfg: ExtendedConfig
+    rows: np.ndarray,
+    pg: _PointGates,
+    cfg: ExtendedConfig,
+    since: float = -math.inf,
+    run_v: np.ndarray | None = None,
+    run_sd: float = math.inf,
 ) -> tuple[np.ndarray, float] | None:
     """The velocity of a cluster (detections ``rows`` of the scan) that the confirmed
     individual tracks in it show, and its standard deviation per axis: the mean ``v̄`` of the
-    velocities ``vᵢ`` of the tracks with one of the cluster's detections in their gate that
-    move together (within ``group_speed_spread`` of their median), two at least, with
+    velocities ``vᵢ`` of the tracks with one of the cluster's detections in their gate, that
+    :func:`_group_clusters` lets explain it (created before ``since``, the run's first time,
+    or resolved; moving within ``group_speed_spread`` plus twice ``run_sd`` of the run's
+    velocity ``run_v``), that move together (within ``group_speed_spread`` of their
+    median), two at least, with
 
         σ² = max(s², σ̄²) / n,    s² = Σ‖vᵢ − v̄‖² / (2 (n − 1)),    σ̄² = mean of tr(P_vᵢ) / 2,
 
@@ -1119,7 +1130,16 @@ def _members_velocity(
         return None
     mine = np.zeros(pg.size, dtype=bool)
     mine[rows] = True
-    trk = np.unique(pg.trk[mine[pg.det]])
+    pairs = mine[pg.det]
+    if since > -math.inf:  # young tracks explain only what they resolve
+        n_det = np.bincount(pg.det, minlength=pg.size)
+        n_trk = np.bincount(pg.trk, minlength=pg.rows.size)
+        resolved = (np.take(n_det, pg.det) == 1) & (np.take(n_trk, pg.trk) == 1)
+        pairs &= (np.take(pg.created, pg.trk) < since) | resolved
+    trk = np.unique(pg.trk[pairs])
+    if run_v is not None and trk.size:
+        off = np.hypot(*(np.take(pg.v, trk, axis=0) - run_v).T)
+        trk = trk[off <= cfg.group_speed_spread + 2.0 * run_sd]
     if trk.size < 2:
         return None
     v = np.take(pg.v, trk, axis=0)

@@ -289,6 +289,20 @@ def test_members_velocity_is_the_mean_of_the_tracks_moving_together_in_the_clust
     # one track, or none, in the cluster: no velocity from the tracks
     one = _members_velocity(np.array([0]), _PointGates(view, scan), TrackerConfig().extended)
     assert one is None
+    # as _group_clusters takes them: tracks created since the run began that do not resolve
+    # their detection, and tracks not moving with the run, show nothing of its velocity
+    young = np.array([[-5.0, 0.0], [-5.0, 15.0], [-5.0, 30.0]])
+    xy2 = np.vstack([xy[:3], young])
+    v2 = np.vstack([v[:3], np.tile([15.0, 0.0], (3, 1))])
+    view2 = _view_of(xy2, v2, [True] * 6)
+    view2 = replace(view2, created=np.array([0.0, 0.0, 0.0, 50.0, 50.0, 50.0]))
+    z2 = np.vstack([xy2[:3], [[-4.0, 8.0], [-4.0, 22.0]]])
+    scan2 = Scan("s", 60.0, z2, np.tile(R, (len(z2), 1, 1)))
+    pg2 = _PointGates(view2, scan2)
+    cfg = TrackerConfig().extended
+    mean2, _ = _members_velocity(np.arange(5), pg2, cfg, 40.0, np.array([-2.5, -6.5]), 3.0)
+    np.testing.assert_allclose(mean2, [-2.5, -6.5])
+    assert _members_velocity(np.arange(5), pg2, cfg, 40.0, np.array([15.0, 0.0]), 1.0) is None
 
 
 def test_birth_velocity_weighs_the_centroid_slope_and_the_tracks_by_inverse_variance():
@@ -827,8 +841,9 @@ def test_a_birth_run_seen_birth_scans_times_may_miss_one_scan_of_its_sensor():
     run = _Candidate.first((0.0, 0.0), 0.0, "a")
     assert run.missed_by("a", 3) is None  # seen once: a miss ends it
     assert run.missed_by("b", 3) is run  # another sensor's scan leaves it
-    for k in (1, 2):
-        run = run.seen_again((10.0 * k, 0.0), 2.0 * k, "a")
+    run = run.seen_again((10.0, 0.0), 2.0, "a")
+    assert run.seen == 2 and run.missed_by("a", 3) is None  # seen twice: still ends it
+    run = run.seen_again((20.0, 0.0), 4.0, "a")
     assert run.seen == 3
     missed = run.missed_by("a", 3)
     assert missed is not None and missed.missed == RUN_MISSES == 1 and missed.seen == 3
