@@ -315,20 +315,26 @@ class TrackingPipeline:
             hand_in=tuple(self._hand_in.values()),
         )
 
-    def _map_disc(self, scan: Scan) -> None:
-        """Start the sensor's clutter map afresh when the disc its batch states (``max_range``
-        about its position; none) is not the one of its last mapped batch."""
+    def _map_disc(self, scan: Scan) -> bool:
+        """Whether the disc the batch states (``max_range`` about its position; none) is the
+        one of its sensor's last mapped batch (or the first): if not, the sensor's clutter map
+        starts afresh and learns from the next batch that states the same (a platform that
+        moves at every batch never teaches it, as before)."""
         cov = scan.coverage
         disc = (
             None
             if cov is None or cov.centre is None or cov.max_range is None
             else (*cov.centre.tolist(), float(cov.max_range))
         )
-        if scan.sensor_id in self._discs and self._discs[scan.sensor_id] != disc:
-            self._clutter.forget(scan.sensor_id)
-        self._discs[scan.sensor_id] = disc
+        known = self._discs.get(scan.sensor_id, disc)
+        self._discs.pop(scan.sensor_id, None)
+        self._discs[scan.sensor_id] = disc  # the most recently heard last
         while len(self._discs) > MAX_MAPPED_SENSORS:
             self._discs.pop(next(iter(self._discs)))
+        if known != disc:
+            self._clutter.forget(scan.sensor_id)
+            return False
+        return True
 
     def _committed(self, scan: Scan, point: PointProposal, rows: np.ndarray, mapped: bool) -> None:
         """After every tracker has taken ``scan``: its time is the last, the hand-overs are
@@ -346,8 +352,7 @@ class TrackingPipeline:
         # the range never see a detection, and are never looked at either while the disc
         # stays where it is; when it moves or changes, the sensor's map starts afresh.
         whole = scan.coverage is None or scan.coverage.polygon is None
-        if mapped and whole and scan.size:
-            self._map_disc(scan)
+        if mapped and whole and scan.size and self._map_disc(scan):
             mask = point.clutter
             clutter = rows if mask is None else rows[np.asarray(mask, dtype=bool)]
             self._clutter.learn(scan.sensor_id, scan.z.take(clutter, axis=0), scan.R)

@@ -607,7 +607,9 @@ def test_a_stated_range_teaches_the_clutter_map_until_it_changes() -> None:
         pipe.process(batch(4.0 * k, 20e3))
     grid = pipe._clutter._grids.get("r")
     assert grid is not None and grid.scans == 10
-    pipe.process(batch(40.0, 10e3))  # the range changed: a new map from this batch
+    pipe.process(batch(40.0, 10e3))  # the range changed: a new map from the next batch
+    assert "r" not in pipe._clutter._grids
+    pipe.process(batch(44.0, 10e3))
     assert pipe._clutter._grids["r"] is not grid and pipe._clutter._grids["r"].scans == 1
     sector = TrackingPipeline(TrackerConfig())
     for k in range(5):
