@@ -341,6 +341,11 @@ Box = tuple[float, float, float, float, float, float | None] | None
 LearnerSnapshot = tuple[tuple[str, float, tuple[Box, ...]], ...]
 
 
+def _finite(value: Any) -> bool:
+    """Whether a JSON value is a finite number (not a bool)."""
+    return isinstance(value, int | float) and not isinstance(value, bool) and math.isfinite(value)
+
+
 class CoverageLearner:
     """The coverage of scans that state none, from where each sensor has been seeing things
     (module docstring). :meth:`coverage` answers for a scan without changing anything;
@@ -440,14 +445,15 @@ class CoverageLearner:
         if position is not None:
             self._positions[sensor_id] = np.asarray(position, dtype=float).reshape(2).copy()
         while len(self._heard) > MAX_SENSORS:
-            gone, _ = self._heard.popitem(last=False)
-            self._boxes.pop(gone, None)
-            self._positions.pop(gone, None)
-        stale = [sid for sid, last in self._heard.items() if t - last > FORGET_AFTER]
-        for sid in stale:
-            del self._heard[sid]
-            self._boxes.pop(sid, None)
-            self._positions.pop(sid, None)
+            self._forget(next(iter(self._heard)))
+        for sid in [sid for sid, last in self._heard.items() if t - last > FORGET_AFTER]:
+            self._forget(sid)
+
+    def _forget(self, sensor_id: str) -> None:
+        """Drop all that is known of ``sensor_id``."""
+        del self._heard[sensor_id]
+        self._boxes.pop(sensor_id, None)
+        self._positions.pop(sensor_id, None)
 
     def snapshot(self) -> LearnerSnapshot:
         """What the learner knows now, immutable (its boxes are shared, not copied)."""
@@ -486,21 +492,9 @@ class CoverageLearner:
                     read.append(None)
                     continue
                 # [x0, y0, x1, y1, sigma], and the range reached (or null) since 2026-11-27
-                ok = isinstance(b, list) and len(b) in (5, 6)
-                ok = ok and all(
-                    isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v)
-                    for v in b[:5]
-                )
+                ok = isinstance(b, list) and len(b) in (5, 6) and all(map(_finite, b[:5]))
                 reach = b[5] if ok and len(b) == 6 else None
-                ok = ok and (
-                    reach is None
-                    or (
-                        isinstance(reach, int | float)
-                        and not isinstance(reach, bool)
-                        and math.isfinite(reach)
-                        and reach >= 0
-                    )
-                )
+                ok = ok and (reach is None or (_finite(reach) and reach >= 0))
                 if not ok or b[0] > b[2] or b[1] > b[3] or b[4] < 0:
                     raise ValueError(
                         f"{where}.boxes: [x0, y0, x1, y1, sigma, range or null] or null each"

@@ -605,6 +605,14 @@ class _PointGates:
         is explained one to one (:attr:`explained`)."""
         return self._sets[2]
 
+    @cached_property
+    def resolved(self) -> np.ndarray:
+        """Mask of the gate pairs whose track is resolved there: the one detection in its
+        gate, in no other track's gate."""
+        n_det = np.bincount(self.det, minlength=self.size)
+        n_trk = np.bincount(self.trk, minlength=self.rows.size)
+        return (np.take(n_det, self.det) == 1) & (np.take(n_trk, self.trk) == 1)
+
     def detections(self, pairs: np.ndarray) -> np.ndarray:
         """Mask of the scan's detections in the gate ``pairs`` (a mask over the pairs)."""
         out = np.zeros(self.size, dtype=bool)
@@ -1132,10 +1140,7 @@ def _members_velocity(
     mine[rows] = True
     pairs = mine[pg.det]
     if since > -math.inf:  # young tracks explain only what they resolve
-        n_det = np.bincount(pg.det, minlength=pg.size)
-        n_trk = np.bincount(pg.trk, minlength=pg.rows.size)
-        resolved = (np.take(n_det, pg.det) == 1) & (np.take(n_trk, pg.trk) == 1)
-        pairs &= (np.take(pg.created, pg.trk) < since) | resolved
+        pairs &= (np.take(pg.created, pg.trk) < since) | pg.resolved
     trk = np.unique(pg.trk[pairs])
     if run_v is not None and trk.size:
         off = np.hypot(*(np.take(pg.v, trk, axis=0) - run_v).T)
@@ -1270,11 +1275,8 @@ def _group_clusters(
         # A track the cluster's own detections started explains its detection only when it
         # is resolved: the one detection in its gate, in no other track's gate (independent
         # targets seen together from the start; not an object's scattered returns).
-        n_det = np.bincount(pg.det, minlength=pg.size)
-        n_trk = np.bincount(pg.trk, minlength=pg.rows.size)
-        det, trk = pg.det[inside], pg.trk[inside]
-        resolved = (np.take(n_det, det) == 1) & (np.take(n_trk, trk) == 1)
-        inside[inside] = (np.take(pg.created, trk) < since[c[inside]]) | resolved
+        trk = pg.trk[inside]
+        inside[inside] = (np.take(pg.created, trk) < since[c[inside]]) | pg.resolved[inside]
     if not inside.any():
         return clusters
     c, det, trk = c[inside], pg.det[inside], pg.trk[inside]
