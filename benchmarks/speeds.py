@@ -5,10 +5,11 @@
 Runs the scenarios of :mod:`clients.scenarios.airspace` (mixed speeds with one radar at
 T = 4 s and T = 1 s; paper 003's formations seen by three unsynchronized radars; a 450 m/s
 target pulling 4 g at T = 2 s; aircraft braking and speeding up on a runway at T = 4 s;
-aircraft and vehicles setting off from rest near the radar at T = 4 s) through the tracker
-with its default configuration and with the defaults it had before two-point initiation
-(single-point starts with a 15 m/s velocity prior; the same IMM, without the turn mode's
-noise along the velocity; a manoeuvre search for turns alone), on the same detections.
+aircraft and vehicles setting off from rest near the radar at T = 4 s; a 40 m/s drone weaving
+at 20°/s at T = 1 s) through the tracker with its default configuration and with the
+defaults it had before two-point initiation (single-point starts with a 15 m/s velocity
+prior; the same IMM, without the turn mode's noise along the velocity and without agile
+turns; a manoeuvre search for turns alone), on the same detections.
 Prints, after the first 8 scans, the effective tracking rate (target-scans held by a
 confirmed track within 150 m that is the same track as at the previous scan) overall and per
 target class, the false confirmed tracks per scan, and the median tracker time per scan.
@@ -51,6 +52,7 @@ from clients.scenarios.airspace import (
     runway_scenario,
     simulate_scripted,
     turn_rate_at,
+    weaving_scenario,
 )
 from clients.scenarios.multitarget import move_targets, reference_scenario, simulate
 from trackers.config import TrackerConfig
@@ -66,6 +68,7 @@ OLD_DEFAULTS = {
         "q_turn_rate": 1e-4,
         "q_ct_along": 0.0,
         "sojourn_times": [30.0, 10.0],
+        "agile_acceleration": 0.0,
     },
     "gating": {"manoeuvre_speed_change": 0.0},
 }
@@ -157,6 +160,7 @@ def main(argv: list[str] | None = None) -> int:
         "450 m/s, 4 g turn, T = 2 s": lambda s: manoeuvre_scenario(seed=s),
         "runway: braking 2 m/s², speeding up 2.5 m/s², T = 4 s": lambda s: runway_scenario(seed=s),
         "apron: setting off from rest 1-3 km out, T = 4 s": lambda s: apron_scenario(seed=s),
+        "weaving drone: 40 m/s, 3 s turns at 20°/s, T = 1 s": lambda s: weaving_scenario(seed=s),
     }
     print("effective tracking rate after 8 scans (150 m, same track as the scan before);")
     print("false confirmed tracks per scan (displaced: a target's own track > 150 m off;")

@@ -99,9 +99,16 @@ class MotionConfig:
     its gate, in sparse clutter, outside every peer's resolution cell (README, *Targets that
     speed up or slow down*). Beside a coordinated-turn mode the
     constant velocity mode resets the turn rate to 0 with std ``cv_turn_rate_std`` (rad/s) at
-    each prediction, so that a finished turn's rate does not live on in it. ``sojourn_times`` are
-    the mean times (s) spent in each mode; they give the mode transition matrix for any
-    interval ``T`` as ``π_jj = exp(−T/τ_j)``, the rest spread evenly over the other modes.
+    each prediction, so that a finished turn's rate does not live on in it; a track at speed
+    ``v`` of 25 m/s or more gets at least ``min(0.5, a / v, 0.2 / T)``, ``T`` the track's
+    revisit (its mean interval between detections times ``track_management.pd``) or the
+    prediction step if longer, with ``a`` = ``agile_acceleration``: the rate at which a
+    lateral acceleration ``a`` turns it (a drone turns faster than an airliner), within
+    0.2 rad a revisit. The manoeuvre search (``gating``) looks for turns at
+    ``min(0.5, a / v, 1 / τ)`` too, ``τ`` the time since the track's last detection.
+    ``sojourn_times`` are the mean times (s) spent in each mode; they give the mode transition
+    matrix for any interval ``T`` as ``π_jj = exp(−T/τ_j)``, the rest spread evenly over the
+    other modes.
     """
 
     models: tuple[str, ...] = _field(
@@ -134,6 +141,16 @@ class MotionConfig:
         " rad/s",
         gt=0,
         le=10.0,
+    )
+    agile_acceleration: float = _field(
+        12.0,
+        "a target of 25 m/s or more may start a turn at the rate of this lateral acceleration"
+        " (a / speed, at most 0.5 rad/s: 0.3 for a 40 m/s drone): its constant-velocity"
+        " mode's turn-rate std is at least that within 0.2 rad a revisit of the track (0.2"
+        " rad/s at 1 s), and so is the manoeuvre search's turn rate within 1 rad since the"
+        " track's last detection, m/s² (0: off)",
+        ge=0,
+        le=1e3,
     )
     sojourn_times: tuple[float, ...] = _field(
         (60.0, 20.0), "mean time spent in each mode, s (one per model)", gt=0, le=1e6, length=(1, 2)

@@ -38,7 +38,12 @@ from trackers.association.gating import (
     max_eigenvalue_2x2,
 )
 from trackers.association.gnn import gnn_assign
-from trackers.association.manoeuvre import ManoeuvreMatch, manoeuvre_search, reaches_beyond
+from trackers.association.manoeuvre import (
+    MAX_AGILE_SEARCH_TURN,
+    ManoeuvreMatch,
+    manoeuvre_search,
+    reaches_beyond,
+)
 from trackers.association.spatial import pairs_within
 from trackers.config import InitiationConfig, TrackerConfig
 from trackers.coverage import disc_fraction, visible_fraction
@@ -62,7 +67,7 @@ from trackers.initiation import (
     pair_candidates,
 )
 from trackers.models.measurement import H_POSITION, MIN_RANGE, range_rate_innovation
-from trackers.models.motion import STATE_DIM, along_track_noise, build_models
+from trackers.models.motion import STATE_DIM, agile_turn_rate, along_track_noise, build_models
 from trackers.peers import (
     HeldDetections,
     PointDirectives,
@@ -332,7 +337,12 @@ class IndividualTracker:
         dt = 0.0 if last is None else time - last
         if len(tracks):
             Pi = transition_matrix(config.motion.sojourn_times, dt)
-            x_pred, P_pred, c_bar = imm_predict(models, tracks.x, tracks.P, tracks.mu, Pi, dt)
+            # an agile turn's prior is per revisit of the track (as its detections show it at
+            # the configured P_D), not per batch of any sensor
+            revisit = _revisit(tracks, config.track_management.pd)
+            x_pred, P_pred, c_bar = imm_predict(
+                models, tracks.x, tracks.P, tracks.mu, Pi, dt, revisit
+            )
             xc, Pc = imm_combine(x_pred, P_pred, c_bar)
         else:
             x_pred, P_pred, c_bar = tracks.x, tracks.P, tracks.mu
@@ -1419,8 +1429,15 @@ def _manoeuvre_found(
     tau = scan.time - tracks.updated[lost]
     # Most lost tracks' manoeuvres stay within their gates: the search's arrays are taken
     # for the others only.
+    agile = config.motion.agile_acceleration
     wide = reaches_beyond(
-        pred.xc[lost], pred.Pc[lost], tau, a_max, omega_max, gating.manoeuvre_speed_change
+        pred.xc[lost],
+        pred.Pc[lost],
+        tau,
+        a_max,
+        omega_max,
+        gating.manoeuvre_speed_change,
+        agile=agile,
     )
     lost, tau = lost[wide], tau[wide]
     free = np.ones(scan.size, dtype=bool)
@@ -1446,6 +1463,7 @@ def _manoeuvre_found(
         max_speed=config.initiation.max_speed,
         a_speed=gating.manoeuvre_speed_change,
         quiet=GATE_CLUTTER,
+        agile=agile,
     )
     if found is None:
         return None
@@ -1755,13 +1773,14 @@ def _relinked(
         e = p_n − p̂_o − ½ (v_n − v_o) Δt,
         S = P_n,pp + P̂_o,pp + (Δt/2)² (P_n,vv + P̂_o,vv),
         eᵀ S⁻¹ e ≤ γ,   N(e; 0, S) ≥ λ_nt,
-        |a| ≤ min(a_max, max(a_0, ω_max max(|v_o|, |v_n|))),
+        |a| ≤ min(a_max, max(a_0, ω v)),   v = max(|v_o|, |v_n|),
 
     with ``p̂_o = p_o + v_o Δt`` the old track's prediction to ``t`` (its covariance grown
     by the coasting), ``λ_nt`` the new-target density in force against the scan's typical
     false-alarm density ``clutter_density``
     (:func:`trackers.scoring.new_target_odds_density`; a vague old track, long lost, loses
-    to a new target), ``a_max`` and ``ω_max`` the manoeuvre search's bounds and ``a_0`` =
+    to a new target), ``a_max`` and ``ω`` the manoeuvre search's bounds (``ω_max``, or from
+    25 m/s the agile rate of ``motion.agile_acceleration`` within 1 rad over ``Δt``) and ``a_0`` =
     :data:`RELINK_MIN_ACCELERATION`. The likeliest pairs (highest ``N(e; 0, S)``) are merged
     first, each track at most once. A target that set off from a hover, braked hard or
     turned out of its track's gate was otherwise seen by a second track while the first
@@ -1783,9 +1802,15 @@ def _relinked(
     speed = np.maximum(
         np.hypot(xn[:, None, 2], xn[:, None, 3]), np.hypot(xo[None, :, 2], xo[None, :, 3])
     )
+    rate = agile_turn_rate(
+        speed,
+        gating.manoeuvre_turn_rate,
+        config.motion.agile_acceleration,
+        dt[None, :],
+        MAX_AGILE_SEARCH_TURN,
+    )
     a_bound = np.minimum(
-        gating.manoeuvre_acceleration,
-        np.maximum(RELINK_MIN_ACCELERATION, gating.manoeuvre_turn_rate * speed),
+        gating.manoeuvre_acceleration, np.maximum(RELINK_MIN_ACCELERATION, rate * speed)
     )
 
     # A cheap bound first (traces for the largest eigenvalues): |p_n − p̂_o| can be at most

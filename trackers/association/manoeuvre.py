@@ -54,7 +54,7 @@ from trackers.association.gating import (
 from trackers.association.gnn import gnn_assign
 from trackers.filters.imm import imm_update
 from trackers.models.measurement import H_POSITION
-from trackers.models.motion import STATE_DIM
+from trackers.models.motion import STATE_DIM, agile_turn_rate
 from trackers.scoring import hit_increment, miss_increment
 
 __all__ = [
@@ -69,6 +69,11 @@ __all__ = [
 #: κ: the along-track acceleration's std as a fraction of the across-track one.
 ALONG_TRACK_FRACTION = 0.2
 
+#: The largest heading change (rad) over the time since its last update that the search looks
+#: for an agile target (25 m/s or more) to have turned by (:func:`_acceleration_bounds`): a
+#: vehicle seen every 10 s is not searched for across its road as far as 0.5 rad/s would reach.
+MAX_AGILE_SEARCH_TURN = 1.0
+
 #: Tracks are searched for when the manoeuvre's across-track position std exceeds this
 #: fraction of their largest predicted position std.
 REACH_FRACTION = 0.5
@@ -80,11 +85,19 @@ def _acceleration_bounds(
     omega_max: float,
     a_speed: float | np.ndarray = 0.0,
     at_rest: np.ndarray | None = None,
+    agile: float = 0.0,
+    tau: float | np.ndarray = 0.0,
 ) -> tuple[np.ndarray, np.ndarray]:
     """The bounds across and along the track for velocities (N, 2):
-    ``a_n = min(a_max, ω_max |v|)`` and ``a_u = max(κ a_n, min(a_speed, a_max))``; where
-    ``at_rest``, whose direction is unknown, ``a_u`` across too."""
-    a_n = np.minimum(a_max, omega_max * np.hypot(velocity[:, 0], velocity[:, 1]))
+    ``a_n = min(a_max, ω |v|)`` and ``a_u = max(κ a_n, min(a_speed, a_max))``; where
+    ``at_rest``, whose direction is unknown, ``a_u`` across too. ``ω = max(ω_max, min(0.5,
+    agile / |v|, 1 / τ))`` (:func:`~trackers.models.motion.agile_turn_rate` over the time
+    ``τ`` since the last update): a slow target turns faster on the same lateral
+    acceleration, within :data:`MAX_AGILE_SEARCH_TURN` over ``τ`` (``agile`` 0:
+    ``ω_max``)."""
+    speed = np.hypot(velocity[:, 0], velocity[:, 1])
+    rate = agile_turn_rate(speed, omega_max, agile, tau, MAX_AGILE_SEARCH_TURN)
+    a_n = np.minimum(a_max, rate * speed)
     a_u = np.maximum(ALONG_TRACK_FRACTION * a_n, np.minimum(a_speed, a_max))
     if at_rest is not None:
         a_n = np.where(at_rest, np.maximum(a_n, a_u), a_n)
@@ -111,6 +124,7 @@ def reaches_beyond(
     a_max: float,
     omega_max: float,
     a_speed: float = 0.0,
+    agile: float = 0.0,
 ) -> np.ndarray:
     """Mask of the tracks (``x_comb (N, 5)``, ``P_comb (N, 5, 5)``, ``τ`` since their last
     update) whose manoeuvre reaches beyond their own uncertainty, which their gate searched
@@ -120,7 +134,7 @@ def reaches_beyond(
         (a² / 3) (τ⁴ / 4) > REACH_FRACTION² λ_max(P_pos),   a = max(a_n, a_u)
 
     (:func:`manoeuvre_covariance`)."""
-    a_n, a_u = _acceleration_bounds(x_comb[:, 2:4], a_max, omega_max, a_speed)
+    a_n, a_u = _acceleration_bounds(x_comb[:, 2:4], a_max, omega_max, a_speed, agile=agile, tau=tau)
     a = np.maximum(a_n, a_u)
     reach = (a * a / 3.0) * (tau**4 / 4.0)
     return reach > REACH_FRACTION**2 * max_eigenvalue_2x2(P_comb[:, :2, :2])
@@ -133,6 +147,7 @@ def manoeuvre_covariance(
     omega_max: float,
     a_speed: float | np.ndarray = 0.0,
     rest: np.ndarray | None = None,
+    agile: float = 0.0,
 ) -> np.ndarray:
     """Q_m(τ) (N, 5, 5) for velocities (N, 2) and times since the last update τ (N,):
     ``A = a_n²/3 n nᵀ + a_u²/3 u uᵀ`` with ``a_n = min(a_max, ω_max |v|)`` across the track
@@ -142,7 +157,7 @@ def manoeuvre_covariance(
     velocity = np.asarray(velocity, dtype=float).reshape(-1, 2)
     tau = np.asarray(tau, dtype=float).reshape(-1)
     speed = np.hypot(velocity[:, 0], velocity[:, 1])
-    a_n, a_u = _acceleration_bounds(velocity, a_max, omega_max, a_speed, rest)
+    a_n, a_u = _acceleration_bounds(velocity, a_max, omega_max, a_speed, rest, agile, tau)
     u = _unit(velocity, speed)
     n = np.stack([-u[:, 1], u[:, 0]], axis=1)
     A = (a_n * a_n / 3.0)[:, None, None] * (n[:, :, None] * n[:, None, :])
@@ -165,6 +180,7 @@ def _speed_kept(
     omega_max: float,
     max_speed: float,
     a_speed: float | np.ndarray = 0.0,
+    agile: float = 0.0,
 ) -> np.ndarray:
     """Mask of the updated pairs (IMM posteriors ``x (K, M, 5)``, ``mu (K, M)``) whose speed
     stays within three standard deviations of the track's (``x_comb``, ``P_comb`` before,
@@ -186,7 +202,7 @@ def _speed_kept(
     v_old = x_comb[:, 2:4]
     before = np.hypot(v_old[:, 0], v_old[:, 1])
     u = _unit(v_old, before)
-    _, a_u = _acceleration_bounds(v_old, a_max, omega_max, a_speed)
+    _, a_u = _acceleration_bounds(v_old, a_max, omega_max, a_speed, agile=agile, tau=tau)
     var = (
         (a_u * tau) ** 2 / 3.0
         + np.einsum("ki,kij,kj->k", u, P_comb[:, 2:4, 2:4], u)
@@ -232,6 +248,7 @@ def manoeuvre_search(
     max_speed: float = np.inf,
     a_speed: float = 0.0,
     quiet: float = np.inf,
+    agile: float = 0.0,
 ) -> ManoeuvreMatch | None:
     """Tracks (predicted mode states ``x_pred (N, M, 5)``, ``P_pred``, ``c_bar (N, M)``, their
     combination ``x_comb (N, 5)``, ``P_comb``, time since the last update ``tau``, detection
@@ -255,10 +272,12 @@ def manoeuvre_search(
     # position std. (A turn of the reference scenario's slow targets never gets there, a
     # change of speed now and then: 30 searches in 100 scans. The cut leaves the mixed-speed
     # scenarios' answers as they are and saves 4/5 of the search's time.)
-    wide = np.flatnonzero(reaches_beyond(x_comb, P_comb, tau, a_max, omega_max, a_speed))
+    wide = np.flatnonzero(
+        reaches_beyond(x_comb, P_comb, tau, a_max, omega_max, a_speed, agile=agile)
+    )
     if wide.size == 0:
         return None
-    Q = manoeuvre_covariance(x_comb[wide, 2:4], tau[wide], a_max, omega_max)
+    Q = manoeuvre_covariance(x_comb[wide, 2:4], tau[wide], a_max, omega_max, agile=agile)
     Q_u = (
         Q
         if a_speed <= 0
@@ -269,6 +288,7 @@ def manoeuvre_search(
             omega_max,
             a_speed,
             at_rest(x_comb[wide, 2:4], P_comb[wide, 2:4, 2:4]),
+            agile,
         )
     )
     S0 = P_comb[wide, :2, :2] + Q[:, :2, :2]
@@ -301,7 +321,9 @@ def manoeuvre_search(
         S_n = S0[h] + R[dj]
         nu = z[dj] - x_comb[ti, :2]
         S_inv, _ = inverse_2x2(S_n)
-        turning = reaches_beyond(x_comb[wide], P_comb[wide], tau[wide], a_max, omega_max)
+        turning = reaches_beyond(
+            x_comb[wide], P_comb[wide], tau[wide], a_max, omega_max, agile=agile
+        )
         turn = ~calm & turning[h] & (np.einsum("ki,kij,kj->k", nu, S_inv, nu) <= gamma)
         keep = calm | turn
         ti, dj, h, calm, p_m = ti[keep], dj[keep], h[keep], calm[keep], p_m[keep]
@@ -318,7 +340,7 @@ def manoeuvre_search(
     # part of the manoeuvre reaches (a false alarm kilometres across the track of an
     # aircraft coasting through two misses) is no manoeuvre of this target.
     keep = _speed_kept(
-        x, mu, x_comb[ti], P_comb[ti], R[dj], tau[ti], a_max, omega_max, max_speed, a_pair
+        x, mu, x_comb[ti], P_comb[ti], R[dj], tau[ti], a_max, omega_max, max_speed, a_pair, agile
     )
     ti, dj, x, P, mu, hit = ti[keep], dj[keep], x[keep], P[keep], mu[keep], hit[keep]
     sel = gnn_assign(ti, dj, hit - miss_increment(pd[ti]), N, z.shape[0])

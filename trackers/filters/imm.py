@@ -181,11 +181,15 @@ def imm_predict(
     mu: np.ndarray,
     Pi: np.ndarray,
     dt: float,
+    revisit: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Mix (:func:`imm_mix`), then let each model j predict its own mixed estimate.
 
     ``x⁻_j, P⁻_j = model_j.predict(x0_j, P0_j, dt)``. Returns x⁻ (N, M, n), P⁻ (N, M, n, n)
     and the predicted mode probabilities c̄ (N, M), which :func:`imm_update` needs.
+    ``revisit`` (N,), each track's interval between its detections, goes to the models that
+    take one (a constant-velocity mode's agile turn prior is per revisit, not per batch:
+    :class:`~trackers.models.motion.ConstantVelocity`).
     """
     x = np.asarray(x, dtype=float)
     P = np.asarray(P, dtype=float)
@@ -201,7 +205,11 @@ def imm_predict(
         x0, P0, c_bar = _mix(state_major(x[rows]), state_major_cov(P[rows]), mu[rows].T, Pi)
         for j, model in enumerate(models):
             predict_sm = getattr(model, "predict_state_major", None)
-            if predict_sm is not None:
+            if predict_sm is not None and revisit is not None and getattr(model, "agile", False):
+                xj, Pj = predict_sm(x0[:, j], P0[:, :, j], dt, revisit[rows])
+                x_out[rows, j] = batch_major(xj)
+                P_out[rows, j] = batch_major_cov(Pj)
+            elif predict_sm is not None:
                 xj, Pj = predict_sm(x0[:, j], P0[:, :, j], dt)
                 x_out[rows, j] = batch_major(xj)
                 P_out[rows, j] = batch_major_cov(Pj)

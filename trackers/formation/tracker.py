@@ -200,7 +200,7 @@ def _sojourn_times_of(motion: MotionConfig, formation: FormationConfig) -> tuple
 
 def member_motion(config: TrackerConfig) -> MotionConfig:
     """The members' IMM: the modes of ``motion``, the constant-velocity mode with the
-    formation's ``q_cv``, ``cv_sojourn_time`` and ``cv_turn_rate_std``."""
+    formation's ``q_cv``, ``cv_sojourn_time`` and ``cv_turn_rate_std``, and no agile turns."""
     return _member_motion_of(config.motion, config.formation)
 
 
@@ -210,6 +210,7 @@ def _member_motion_of(motion: MotionConfig, formation: FormationConfig) -> Motio
         q_cv=formation.q_cv,
         sojourn_times=_sojourn_times_of(motion, formation),
         cv_turn_rate_std=formation.cv_turn_rate_std,
+        agile_acceleration=0.0,  # a formation flies steadily: no agile turns
     )
 
 

@@ -36,6 +36,18 @@ def test_covariance_turns_with_the_velocity_and_is_capped():
     assert (Q[1] == 0).all()  # a parked target cannot turn: no search at all
 
 
+def test_covariance_of_an_agile_target_across_the_track():
+    # A 40 m/s drone pulling 12 m/s² turns at 0.3 rad/s: a = 0.3 · 40 = 12 m/s² across the
+    # track instead of 0.1 · 40 = 4, within one radian over τ (τ = 20 s: 0.05 -> ω_max).
+    v, tau = np.array([[40.0, 0.0], [40.0, 0.0], [250.0, 0.0]]), np.array([2.0, 20.0, 2.0])
+    plain = manoeuvre_covariance(v, tau, 50.0, 0.1)
+    agile = manoeuvre_covariance(v, tau, 50.0, 0.1, agile=12.0)
+    across = np.array([12.0, 4.0, 25.0]) ** 2 / 3.0 * tau**4 / 4.0
+    np.testing.assert_allclose(agile[:, 1, 1], across, rtol=1e-12)
+    np.testing.assert_allclose(agile[1:], plain[1:], rtol=1e-12)  # long τ, fast: as before
+    assert agile[0, 1, 1] == pytest.approx(9.0 * plain[0, 1, 1])
+
+
 def _one_track(speed):
     """One CV/CT track at the origin flying along x, predicted 4 s since its last update."""
     x = np.zeros((1, 2, 5))

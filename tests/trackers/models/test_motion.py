@@ -10,8 +10,10 @@ import pytest
 from trackers.config import MotionConfig
 from trackers.models import motion
 from trackers.models.motion import (
+    AGILE_MIN_SPEED,
     ConstantVelocity,
     CoordinatedTurn,
+    agile_turn_rate,
     along_track_noise,
     batch_major,
     batch_major_cov,
@@ -137,9 +139,57 @@ def test_cv_with_turn_rate_std_resets_the_turn_rate() -> None:
         ConstantVelocity(1.0, turn_rate_std=-0.1)
 
 
+def test_agile_turn_rate_worked_values() -> None:
+    # ω(v) = max(ω₀, min(0.5, a / v, Δψ / T)) from 25 m/s on, ω₀ below.
+    v = np.array([0.0, 10.0, 24.9, 25.0, 40.0, 250.0, 700.0])
+    np.testing.assert_allclose(
+        agile_turn_rate(v, 0.05, 12.0), [0.05, 0.05, 0.05, 0.48, 0.3, 0.05, 0.05]
+    )
+    # at most 0.2 rad a step: 0.2 rad/s over 1 s; over 4 s ω₀ stands; 0.125 with 0.5 rad
+    np.testing.assert_allclose(agile_turn_rate(v[3:5], 0.05, 12.0, 1.0), [0.2, 0.2])
+    np.testing.assert_allclose(agile_turn_rate(v[3:5], 0.05, 12.0, 4.0), [0.05, 0.05])
+    np.testing.assert_allclose(agile_turn_rate(v[3:5], 0.05, 12.0, 4.0, 0.5), [0.125, 0.125])
+    # one step per speed, with its own limit of 1 rad; no acceleration: ω₀ everywhere
+    np.testing.assert_allclose(
+        agile_turn_rate(np.array([40.0, 40.0, 40.0]), 0.1, 12.0, np.array([0.0, 5.0, 20.0]), 1.0),
+        [0.3, 0.2, 0.1],
+    )
+    np.testing.assert_array_equal(agile_turn_rate(v, 0.05, 0.0), np.full(v.size, 0.05))
+    assert AGILE_MIN_SPEED == 25.0
+
+
+def test_cv_turn_rate_prior_of_an_agile_target_grows_as_its_speed_falls() -> None:
+    # Q₄₄ = ω(|v|)² per state, within 0.2 rad a step; the rest as without agility (a = 12).
+    x = np.zeros((4, 5))
+    x[:, 2] = [10.0, 30.0, 40.0, 250.0]
+    P = np.tile(np.eye(5), (4, 1, 1))
+    agile = ConstantVelocity(0.5, turn_rate_std=0.05, agile_acceleration=12.0)
+    plain = ConstantVelocity(0.5, turn_rate_std=0.05)
+    assert agile.agile and not plain.agile
+    expected = np.array([0.05, 0.4, 0.3, 0.05]) ** 2  # a 0.25 s step: a / v itself
+    _, P_agile = agile.predict(x, P, 0.25)
+    _, P_plain = plain.predict(x, P, 0.25)
+    np.testing.assert_allclose(P_agile[:, 4, 4], expected, rtol=1e-12)
+    np.testing.assert_allclose(agile.process_noise(x, 0.25)[:, 4, 4], expected, rtol=1e-12)
+    P_agile[:, 4, 4] = P_plain[:, 4, 4]
+    np.testing.assert_array_equal(P_agile, P_plain)
+    # over 1 s, 0.2 rad/s; a track seen every 4 s is held to ω₀ even over a 0.25 s step
+    _, P1 = agile.predict(x, P, 1.0)
+    np.testing.assert_allclose(P1[:, 4, 4], np.array([0.05, 0.2, 0.2, 0.05]) ** 2)
+    revisit = np.array([4.0, 4.0, 1.0, 1.0])
+    _, Ps = agile.predict_state_major(state_major(x), state_major_cov(P), 0.25, revisit)
+    np.testing.assert_allclose(Ps[4, 4], np.array([0.05, 0.05, 0.2, 0.05]) ** 2)
+    np.testing.assert_allclose(
+        agile.process_noise(x, 0.25, revisit)[:, 4, 4], np.array([0.05, 0.05, 0.2, 0.05]) ** 2
+    )
+    with pytest.raises(ValueError, match="agile_acceleration"):
+        ConstantVelocity(1.0, 0.05, agile_acceleration=-1.0)
+
+
 def test_build_models_resets_the_cv_turn_rate_only_beside_a_turn_mode() -> None:
     both = build_models(MotionConfig(cv_turn_rate_std=0.02))
     assert both[0].turn_rate_std == 0.02
+    assert both[0].agile_acceleration == MotionConfig().agile_acceleration == 12.0
     alone = build_models(
         MotionConfig(models=("cv",), sojourn_times=(30.0,), initial_mode_probabilities=(1.0,))
     )
