@@ -193,8 +193,10 @@ class MeasurementConfig:
     manoeuvre's first scans each mode's velocity is off by more than its covariance says, and
     a tighter value then hands the track to the wrong mode (a 3 g turn at T = 4 s through a
     missed scan was lost at 1-5 m/s and held at 10). A false alarm's range-rate is taken as
-    uniform within ``±initiation.max_speed``, so a consistent one adds
-    ``ln(2 v_max N(ν; 0, S))`` to the track's score."""
+    half surface clutter near zero Doppler (``N(0, clutter_range_rate_std²)`` on the ground)
+    and half uniform within ``±initiation.max_speed``, so a consistent one adds
+    ``ln(N(ν; 0, S) / p_fa(ṙ))`` to the track's score: much for a target moving along the
+    beam, nothing for one crossing it, whose range-rate wind-blown trees give as well."""
 
     position_std: float = _field(
         10.0, "position noise per axis, m, of detections that carry no covariance", ge=1e-3, le=1e5
@@ -205,6 +207,14 @@ class MeasurementConfig:
         " to a mode's velocity error between scans",
         gt=0,
         le=1e4,
+    )
+    clutter_range_rate_std: float = _field(
+        2.0,
+        "spread of the range-rates of surface clutter (vegetation, sea, ground), m/s: half of"
+        " the false alarms are taken to be still on the ground within it, so a track's"
+        " range-rate near zero counts nothing for it (0: false alarms' range-rates uniform)",
+        ge=0,
+        le=1e3,
     )
 
     def __post_init__(self) -> None:
