@@ -193,10 +193,11 @@ class MeasurementConfig:
     manoeuvre's first scans each mode's velocity is off by more than its covariance says, and
     a tighter value then hands the track to the wrong mode (a 3 g turn at T = 4 s through a
     missed scan was lost at 1-5 m/s and held at 10). A false alarm's range-rate is taken as
-    half surface clutter near zero Doppler (``N(0, clutter_range_rate_std²)`` on the ground)
-    and half uniform within ``±initiation.max_speed``, so a consistent one adds
+    a tenth surface clutter near zero Doppler (``N(0, clutter_range_rate_std²)`` on the
+    ground) and the rest uniform within ``±initiation.max_speed``, so a consistent one adds
     ``ln(N(ν; 0, S) / p_fa(ṙ))`` to the track's score: much for a target moving along the
-    beam, nothing for one crossing it, whose range-rate wind-blown trees give as well."""
+    beam (about 4 a hit), little for one crossing it (about 0.6), whose range-rate wind-blown
+    trees give as well. ``clutter_range_rate_std`` is 0 (all uniform) or at least 0.01."""
 
     position_std: float = _field(
         10.0, "position noise per axis, m, of detections that carry no covariance", ge=1e-3, le=1e5
@@ -210,15 +211,21 @@ class MeasurementConfig:
     )
     clutter_range_rate_std: float = _field(
         2.0,
-        "spread of the range-rates of surface clutter (vegetation, sea, ground), m/s: half of"
-        " the false alarms are taken to be still on the ground within it, so a track's"
-        " range-rate near zero counts nothing for it (0: false alarms' range-rates uniform)",
+        "spread of the range-rates of surface clutter (vegetation, sea, ground), m/s: a tenth"
+        " of the false alarms are taken to be still on the ground within it, so a track's"
+        " range-rate near zero counts little for it (0: false alarms' range-rates uniform;"
+        " else at least 0.01)",
         ge=0,
         le=1e3,
     )
 
     def __post_init__(self) -> None:
         _check_bounds(self, "measurement")
+        if 0.0 < self.clutter_range_rate_std < 0.01:
+            raise ValueError(
+                "measurement.clutter_range_rate_std: 0 or at least 0.01, got "
+                f"{self.clutter_range_rate_std!r}"
+            )
 
 
 INITIATION_METHODS = ("two_point", "single_point")

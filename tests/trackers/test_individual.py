@@ -465,7 +465,7 @@ def test_a_false_alarm_range_rate_is_surface_clutter_or_spread_evenly() -> None:
 
     got = _false_range_rate_log_density(rdot, z, sensor, None, v_max, MeasurementConfig())
     np.testing.assert_allclose(got, expected(rdot), rtol=1e-12)
-    # seen from a sensor flying at (100, 0): the ground recedes at −u·v_s = −60 m/s
+    # seen from a sensor flying at (100, 0) towards the point: the ground closes, −u·v_s = −60
     moving = _false_range_rate_log_density(
         np.array([-60.0, -30.0]), z, sensor, (100.0, 0.0), v_max, MeasurementConfig()
     )
@@ -474,6 +474,8 @@ def test_a_false_alarm_range_rate_is_surface_clutter_or_spread_evenly() -> None:
         rdot, z, sensor, None, v_max, MeasurementConfig(clutter_range_rate_std=0.0)
     )
     np.testing.assert_allclose(flat, np.log(1 / (2 * v_max)))
+    with pytest.raises(ValueError, match="clutter_range_rate_std"):
+        MeasurementConfig(clutter_range_rate_std=1e-9)
 
 
 def _vegetation(config: TrackerConfig, seed: int) -> float:
@@ -506,7 +508,7 @@ def test_range_rates_near_zero_confirm_no_tracks_on_vegetation() -> None:
     config = TrackerConfig()
     assert max(_vegetation(config, seed) for seed in range(3)) <= 0.02
     uniform = config.merged({"measurement": {"clutter_range_rate_std": 0.0}})
-    assert np.mean([_vegetation(uniform, seed) for seed in range(3)]) > 0.3
+    assert np.mean([_vegetation(uniform, seed) for seed in range(3)]) > 0.1
 
 
 @pytest.mark.parametrize("rdot", [300.0, 500.0, -2000.0])
