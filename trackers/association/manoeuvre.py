@@ -91,10 +91,10 @@ def _acceleration_bounds(
     """The bounds across and along the track for velocities (N, 2):
     ``a_n = min(a_max, ω |v|)`` and ``a_u = max(κ a_n, min(a_speed, a_max))``; where
     ``at_rest``, whose direction is unknown, ``a_u`` across too. ``ω = max(ω_max, min(0.5,
-    agile / |v|, 1 / τ))`` (:func:`~trackers.models.motion.agile_turn_rate` over the time
-    ``τ`` since the last update): a slow target turns faster on the same lateral
-    acceleration, within :data:`MAX_AGILE_SEARCH_TURN` over ``τ`` (``agile`` 0:
-    ``ω_max``)."""
+    agile / |v|, 1 / τ))`` from 25 m/s on, else ``ω_max``
+    (:func:`~trackers.models.motion.agile_turn_rate` over the time ``τ`` since the last
+    update): a slower target turns faster on the same lateral acceleration, within
+    :data:`MAX_AGILE_SEARCH_TURN` over ``τ`` (``agile`` 0: ``ω_max``)."""
     speed = np.hypot(velocity[:, 0], velocity[:, 1])
     rate = agile_turn_rate(speed, omega_max, agile, tau, MAX_AGILE_SEARCH_TURN)
     a_n = np.minimum(a_max, rate * speed)

@@ -205,12 +205,11 @@ def imm_predict(
         x0, P0, c_bar = _mix(state_major(x[rows]), state_major_cov(P[rows]), mu[rows].T, Pi)
         for j, model in enumerate(models):
             predict_sm = getattr(model, "predict_state_major", None)
-            if predict_sm is not None and revisit is not None and getattr(model, "agile", False):
-                xj, Pj = predict_sm(x0[:, j], P0[:, :, j], dt, revisit[rows])
-                x_out[rows, j] = batch_major(xj)
-                P_out[rows, j] = batch_major_cov(Pj)
-            elif predict_sm is not None:
-                xj, Pj = predict_sm(x0[:, j], P0[:, :, j], dt)
+            if predict_sm is not None:
+                if revisit is not None and getattr(model, "agile", False):
+                    xj, Pj = predict_sm(x0[:, j], P0[:, :, j], dt, revisit[rows])
+                else:
+                    xj, Pj = predict_sm(x0[:, j], P0[:, :, j], dt)
                 x_out[rows, j] = batch_major(xj)
                 P_out[rows, j] = batch_major_cov(Pj)
             else:  # a model with only the batch-major predict
