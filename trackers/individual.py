@@ -67,7 +67,7 @@ from trackers.initiation import (
     pair_candidates,
 )
 from trackers.models.measurement import H_POSITION, MIN_RANGE, range_rate_innovation
-from trackers.models.motion import STATE_DIM, agile_turn_rate, along_track_noise, build_models
+from trackers.models.motion import STATE_DIM, agile_turn_rate, along_track_block, build_models
 from trackers.peers import (
     HeldDetections,
     PointDirectives,
@@ -704,7 +704,7 @@ class IndividualTracker:
             hits[at] += 1
             instants[at] += tracks.updated[at] <= scan.time - MIN_PAIR_INTERVAL
             updated[at] = scan.time
-            det_ids[at] = _objects([() if i is None else (i,) for i in scan.detection_ids])[ad]
+            det_ids[at] = scan.detection_id_groups.take(ad)
         x_comb, P_comb = imm_combine(x, P, mu)
         # A detection in a confirmed track's gate belongs to that target's neighbourhood: when
         # the track did not take it, it is far likelier clutter or a second detection of the
@@ -1155,7 +1155,7 @@ def _along_where_calm(
     # over τ, the time since the track's last detection: a track that coasted gets the
     # noise of its whole coast, not of the last interval
     tau = pred.time - tracks.updated[rows]
-    P_pairs[k, j] += along_track_noise(pred.x_pred[rows, j], motion.q_ct_along, tau)
+    P_pairs[k, j, 0:4, 0:4] += along_track_block(pred.x_pred[rows, j, 2:4], motion.q_ct_along, tau)
 
 
 def _remoded(tracks: TrackArrays, config: TrackerConfig) -> TrackArrays:
@@ -1204,12 +1204,7 @@ def _new_tracks(
     P0[:, :4, :4] = P
     P0[:, 4, 4] = config.initiation.turn_rate_std**2
     ids = counters.ids(n)
-    det_ids = _objects(
-        [
-            () if scan.detection_ids[j] is None else (scan.detection_ids[j],)
-            for j in detections.tolist()
-        ]
-    )
+    det_ids = scan.detection_id_groups.take(detections)
     return TrackArrays(
         ids=ids,
         x=np.repeat(x0[:, None, :], M, axis=1),
@@ -1425,6 +1420,8 @@ def _manoeuvre_found(
         lost &= seen
     lost[assigned] = False
     lost = np.flatnonzero(lost)
+    if lost.size == 0:
+        return None
     gating = config.gating
     a_max, omega_max = gating.manoeuvre_acceleration, gating.manoeuvre_turn_rate
     tau = scan.time - tracks.updated[lost]

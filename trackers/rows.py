@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 from typing import Self
 
 import numpy as np
@@ -16,7 +17,7 @@ class RowArrays:
     __dataclass_fields__: dict[str, object]
 
     def __len__(self) -> int:
-        return len(getattr(self, next(iter(self.__dataclass_fields__))))
+        return len(getattr(self, _first_field(type(self))))
 
     def take(self, index: np.ndarray) -> Self:
         """The rows at ``index`` (integer indices or a boolean mask); ``self`` itself when a
@@ -37,6 +38,12 @@ class RowArrays:
                 for k in self.__dataclass_fields__
             }
         )
+
+
+@functools.cache
+def _first_field(cls: type) -> str:
+    """The name of a row dataclass's first field (its length is the number of rows)."""
+    return next(iter(cls.__dataclass_fields__))  # type: ignore[attr-defined]
 
 
 def sort_within_groups(

@@ -110,6 +110,18 @@ class Scan:
         """Number of detections."""
         return int(self.z.shape[0])
 
+    @cached_property
+    def detection_id_groups(self) -> np.ndarray:
+        """``(n,)`` object array: each detection's id as the group of ids a track that takes
+        it holds, ``(id,)``, or ``()`` for a detection without one (made once a scan)."""
+        ids = self.detection_ids
+        if ids.count(None) == len(ids):
+            out = np.empty(len(ids), dtype=object)
+            out.fill(())
+            return out
+        groups = [() if i is None else (i,) for i in ids]
+        return np.fromiter(groups, dtype=object, count=len(groups))
+
     def subset(self, keep: np.ndarray) -> Scan:
         """The same scan restricted to the detections where the boolean mask ``keep`` is true."""
         keep = np.asarray(keep, dtype=bool)

@@ -906,13 +906,13 @@ def _along_rows(monkeypatch, scans, cfg=None) -> list[int]:
     import trackers.individual as individual
 
     seen: list[int] = []
-    noise = individual.along_track_noise
+    noise = individual.along_track_block
 
-    def counted(x, q, dt):
-        seen.append(len(x))
-        return noise(x, q, dt)
+    def counted(v, q, dt):
+        seen.append(len(v))
+        return noise(v, q, dt)
 
-    monkeypatch.setattr(individual, "along_track_noise", counted)
+    monkeypatch.setattr(individual, "along_track_block", counted)
     tr = IndividualTracker(cfg or TrackerConfig())
     for s in scans:
         n = len(seen)
@@ -944,9 +944,9 @@ def test_no_along_track_noise_inside_a_peers_resolution_cell(monkeypatch):
     from trackers.peers import PointDirectives
 
     seen: list[int] = []
-    noise = individual.along_track_noise
+    noise = individual.along_track_block
     monkeypatch.setattr(
-        individual, "along_track_noise", lambda x, q, dt: seen.append(len(x)) or noise(x, q, dt)
+        individual, "along_track_block", lambda v, q, dt: seen.append(len(v)) or noise(v, q, dt)
     )
     tr = IndividualTracker(TrackerConfig())
     for t in range(6):

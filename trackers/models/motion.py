@@ -40,6 +40,7 @@ __all__ = [
     "CoordinatedTurn",
     "MotionModel",
     "agile_turn_rate",
+    "along_track_block",
     "along_track_noise",
     "batch_major",
     "batch_major_cov",
@@ -190,17 +191,23 @@ def agile_turn_rate(
     ``acceleration`` 0 gives ``base`` everywhere."""
     v = np.abs(np.asarray(speed, dtype=float))
     T = np.asarray(step, dtype=float)
+    same = T.ndim == 0 or T.shape == v.shape
+    shape = v.shape if same else np.broadcast_shapes(v.shape, T.shape)
+    if acceleration <= 0.0:
+        return np.full(shape, float(base))
+    fast = v >= AGILE_MIN_SPEED
+    # nothing above ω₀ when no target is fast enough or a / v ≤ ω₀ for every one
+    if acceleration <= base * float(v.min(initial=np.inf, where=fast)):
+        return np.full(shape, float(base))
     if T.ndim == 0:
         cap = MAX_AGILE_TURN_RATE if not T > 0.0 else min(MAX_AGILE_TURN_RATE, max_turn / float(T))
-        if acceleration <= 0.0 or cap <= base:  # nothing above ω₀ (a 4 s revisit, defaults)
+        if cap <= base:  # (a 4 s revisit, defaults)
             return np.full(v.shape, float(base))
-    elif acceleration <= 0.0:
-        return np.full(np.broadcast_shapes(v.shape, T.shape), float(base))
     else:
         with np.errstate(divide="ignore", invalid="ignore"):
             cap = np.minimum(MAX_AGILE_TURN_RATE, np.where(T > 0.0, max_turn / T, np.inf))
     # a / v for the fast enough (a / ∞ = 0 for the others), within [ω₀, the caps]
-    rate = acceleration / np.where(v >= AGILE_MIN_SPEED, v, np.inf)
+    rate = acceleration / np.where(fast, v, np.inf)
     return np.maximum(np.minimum(rate, cap), base)
 
 
@@ -218,19 +225,27 @@ def along_track_noise(x: np.ndarray, q: float, dt: float | np.ndarray) -> np.nda
     T = np.asarray(dt, dtype=float)
     if not (np.isfinite(T).all() and (T >= 0.0).all()):
         raise ValueError(f"dt: must be finite numbers >= 0, got {dt!r}")
-    T = np.broadcast_to(T, x.shape[:-1])[..., None, None]
-    v = x[..., 2:4]
-    v2 = np.einsum("...i,...i->...", v, v)
+    Q = np.zeros((*x.shape[:-1], STATE_DIM, STATE_DIM))
+    Q[..., 0:4, 0:4] = along_track_block(x[..., 2:4], q, np.broadcast_to(T, x.shape[:-1]))
+    return Q
+
+
+def along_track_block(v: np.ndarray, q: float, T: np.ndarray) -> np.ndarray:
+    """The ``[x, y, vx, vy]`` block ``(..., 4, 4)`` of :func:`along_track_noise` for
+    velocities ``v (..., 2)`` and intervals ``T (...)``, unchecked (the update's hot path)."""
+    v2 = v[..., 0] * v[..., 0] + v[..., 1] * v[..., 1]
     uu = (v[..., :, None] * v[..., None, :]) * (q / np.maximum(v2, 1e-300))[..., None, None]
     rest = v2 < 1e-18
     if rest.any():
         uu[rest] = 0.5 * q * np.eye(2)
     t2 = T * T
-    Q = np.zeros((*x.shape[:-1], STATE_DIM, STATE_DIM))
-    Q[..., 0:2, 0:2] = (t2 * T / 3.0) * uu
-    Q[..., 0:2, 2:4] = Q[..., 2:4, 0:2] = (0.5 * t2) * uu
-    Q[..., 2:4, 2:4] = T * uu
-    return Q
+    C = np.empty((*T.shape, 2, 2))
+    C[..., 0, 0] = t2 * T / 3.0
+    C[..., 0, 1] = C[..., 1, 0] = 0.5 * t2
+    C[..., 1, 1] = T
+    # Q[2a + i, 2b + j] = C[a, b] uu[i, j]
+    block = C[..., :, None, :, None] * uu[..., None, :, None, :]
+    return block.reshape(*T.shape, 4, 4)
 
 
 class MotionModel(Protocol):
