@@ -230,6 +230,9 @@ class TrackingPipeline:
         # disc each sensor's last mapped batch stated (max_range about its position, or None).
         self._clutter = ClutterMap()
         self._discs: dict[str, tuple[float, float, float] | None] = {}
+        # The coverage polygon each sensor's last batch stated and the one its map was last
+        # taught under (None: none; not saved either: _same_view).
+        self._polygons: dict[str, tuple[np.ndarray | None, np.ndarray | None]] = {}
 
     @classmethod
     def all_kinds(
@@ -279,6 +282,7 @@ class TrackingPipeline:
         self._coverage = CoverageLearner()
         self._clutter = ClutterMap()
         self._discs = {}
+        self._polygons = {}
 
     # -- hand-over between trackers of neighbouring sectors ---------------------------------
 
@@ -315,6 +319,26 @@ class TrackingPipeline:
             hand_in=tuple(self._hand_in.values()),
         )
 
+    def _same_view(self, scan: Scan) -> bool:
+        """Whether ``scan`` states no coverage polygon, or the one its sensor's previous batch
+        stated (a fixed field of view rather than a sector). A polygon other than the one
+        the sensor's map was last taught under (a camera pointed elsewhere) makes the map
+        start afresh. Every batch is remembered (the :data:`MAX_MAPPED_SENSORS` most recently
+        heard sensors; not saved). A radar that reports one sector in several batches, each
+        stating it, would teach the map as if each looked everywhere."""
+        cov = scan.coverage
+        polygon = None if cov is None or cov.polygon is None else cov.polygon
+        sid = scan.sensor_id
+        last, taught = self._polygons.pop(sid, (None, None))
+        if polygon is not None and taught is not None and not np.array_equal(polygon, taught):
+            self._clutter.forget(sid)
+            taught = None
+        same = polygon is None or (last is not None and np.array_equal(polygon, last))
+        self._polygons[sid] = (polygon, polygon if same else taught)  # most recently heard last
+        while len(self._polygons) > MAX_MAPPED_SENSORS:
+            self._polygons.pop(next(iter(self._polygons)))
+        return same
+
     def _map_disc(self, scan: Scan) -> bool:
         """Whether the disc the batch states (``max_range`` about its position; none) is the
         one of its sensor's last mapped batch (or the first): if not, the sensor's clutter map
@@ -348,10 +372,12 @@ class TrackingPipeline:
         self._coverage.learn(scan.sensor_id, scan.time, scan.z, scan.R, scan.sensor_position)
         # A batch with a coverage polygon of its own (a sector of a revolution) or no
         # detection (a heartbeat) would count as a look at every cell: the map learns from
-        # the others. A range alone (``max_range``) is a whole revolution: its cells beyond
-        # the range never see a detection, and are never looked at either while the disc
-        # stays where it is; when it moves or changes, the sensor's map starts afresh.
-        whole = scan.coverage is None or scan.coverage.polygon is None
+        # the others, and from a polygon that the sensor's previous batch stated too (a
+        # camera's fixed field of view: cells outside it never see a detection). A range
+        # alone (``max_range``) is a whole revolution: its cells beyond the range never see a
+        # detection, and are never looked at either while the disc stays where it is; when
+        # it moves or changes, the sensor's map starts afresh.
+        whole = self._same_view(scan)
         if mapped and whole and scan.size and self._map_disc(scan):
             mask = point.clutter
             clutter = rows if mask is None else rows[np.asarray(mask, dtype=bool)]

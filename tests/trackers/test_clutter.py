@@ -176,6 +176,40 @@ def test_sector_and_empty_batches_teach_the_map_nothing() -> None:
     assert pipe._clutter._grids["r"].scans == 10
 
 
+def test_a_fixed_field_of_view_teaches_the_map_and_sectors_do_not() -> None:
+    """A camera whose batches all state its field of view (one polygon) teaches the map from
+    its second batch on (before, a stated polygon taught nothing, and a camera scene's false
+    alarms were taken at the configured 1e-6 per m²); pointed elsewhere, its map starts
+    afresh; a radar reporting a revolution sector by sector, each batch with its own polygon,
+    still teaches nothing."""
+    from trackers.coverage import Coverage
+
+    def box(x0: float) -> Coverage:  # a new array each batch, as each batch's JSON gives it
+        return Coverage(
+            polygon=np.array([[x0, 0.0], [x0 + 60.0, 0.0], [x0 + 60.0, 40.0], [x0, 40.0]])
+        )
+
+    pipe = TrackingPipeline(TrackerConfig())
+    rng = np.random.default_rng(5)
+    for k in range(10):
+        z = rng.uniform([0.0, 0.0], [60.0, 40.0], (3, 2))
+        pipe.process(Scan("cam", 0.1 * k, z, _R(3, 0.5), coverage=box(-0.0 if k % 2 else 0.0)))
+        angle = np.radians(45.0 * k)
+        rim = [[np.cos(a), np.sin(a)] for a in (angle, angle + np.radians(45.0))]
+        sector = Coverage(polygon=np.array([[0.0, 0.0], *(5e3 * np.array(rim))]))
+        pipe.process(
+            Scan("radar", 0.1 * k + 0.05, rng.uniform(0, 5e3, (5, 2)), _R(5), coverage=sector)
+        )
+    assert pipe._clutter._grids["cam"].scans == 9
+    assert "radar" not in pipe._clutter._grids
+    # the camera's scene: 3 false alarms a frame over 2,400 m², about 1.2e-3 per m²
+    assert pipe._clutter.read("cam", np.zeros((1, 2)), 1e-6)[1] > 1e-4
+    for k in range(10, 13):  # pointed 100 m east: forgotten, then learned from its 2nd batch
+        z = rng.uniform([100.0, 0.0], [160.0, 40.0], (3, 2))
+        pipe.process(Scan("cam", 0.1 * k, z, _R(3, 0.5), coverage=box(100.0)))
+    assert pipe._clutter._grids["cam"].scans == 2
+
+
 def test_a_much_finer_first_batch_does_not_set_the_cells_for_good() -> None:
     m = ClutterMap()
     m.learn("r", np.zeros((1, 2)), _R(1, 0.05))  # one detection of 5 cm: 1 m cells

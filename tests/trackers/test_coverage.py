@@ -588,15 +588,15 @@ def test_an_empty_batch_without_a_position_keeps_the_learned_range() -> None:
 def test_a_stated_range_teaches_the_clutter_map_until_it_changes() -> None:
     """Batches stating only max_range teach the sensor's clutter map; one stating another
     range (or position) starts it afresh: the cells it no longer looks at would be counted
-    as looked at and empty. A polygon (a sector) teaches it nothing, as before."""
+    as looked at and empty. A polygon that changes from batch to batch (sectors) teaches it
+    nothing; one that stays (a fixed field of view) teaches it from its second batch."""
     rng = np.random.default_rng(6)
 
-    def batch(t: float, rmax: float, polygon: bool = False) -> Scan:
+    def batch(t: float, rmax: float, polygon: float | None = None) -> Scan:
         z = _disc_clutter(rng, 20, [0.0, 0.0], rmax)
+        side = [[-1.0, -1.0], [1.0, -1.0], [1.0, 1.0], [-1.0, 1.0]]
         cov = Coverage(
-            polygon=np.array([[-1e5, -1e5], [1e5, -1e5], [1e5, 1e5], [-1e5, 1e5]])
-            if polygon
-            else None,
+            polygon=None if polygon is None else polygon * np.array(side),
             centre=np.zeros(2),
             max_range=rmax,
         )
@@ -613,5 +613,9 @@ def test_a_stated_range_teaches_the_clutter_map_until_it_changes() -> None:
     assert pipe._clutter._grids["r"] is not grid and pipe._clutter._grids["r"].scans == 1
     sector = TrackingPipeline(TrackerConfig())
     for k in range(5):
-        sector.process(batch(4.0 * k, 20e3, polygon=True))
+        sector.process(batch(4.0 * k, 20e3, polygon=1e5 + k))
     assert "r" not in sector._clutter._grids
+    fixed = TrackingPipeline(TrackerConfig())
+    for k in range(5):
+        fixed.process(batch(4.0 * k, 20e3, polygon=1e5))
+    assert fixed._clutter._grids["r"].scans == 4

@@ -43,9 +43,11 @@ Each scan (:meth:`ExtendedTracker.propose`, then :meth:`~ExtendedTracker.commit`
    by confirmed tracks moving together (with each other and with the cluster's run), less
    those of targets being acquired (tracks of ``ESTABLISHED_HITS`` detections, confirmed or
    not, that explain them one to one: alone with a detection, two side by side, or rivals
-   of one start). Its velocity is the slope of the run's centroids, weighed with the mean
-   velocity of the confirmed individual tracks in the cluster that move together, if any
-   (:func:`_birth_velocity`).
+   of one start); a cluster that lies among more detections of individual targets (explained
+   one to one by confirmed tracks not moving with it) than it holds starts none
+   (:func:`_among_individuals`: a crowd's leftovers chained across a plaza). Its velocity is
+   the slope of the run's centroids, weighed with the mean velocity of the confirmed
+   individual tracks in the cluster that move together, if any (:func:`_birth_velocity`).
 
 Tracks can also be started by hand (:meth:`ExtendedTracker.start`), from a centroid,
 velocity and extent prior; such a track is confirmed at once.
@@ -1071,6 +1073,7 @@ class ExtendedTracker(SavesImmutableState):
         )
         kept = _group_clusters([rows for rows, _ in ripe], point_gates(), cfg, since, moving)
         kept = _not_acquiring(kept, view, scan)
+        kept = _among_individuals(kept, scan, point_gates(), sigma, moving, cfg.group_speed_spread)
         members = [
             _members_velocity(rows, point_gates(), cfg, run.first_time, run.velocity, sd)
             for rows, (_, run), sd in zip(kept, ripe, moving[1].tolist(), strict=True)
@@ -1196,6 +1199,61 @@ def _not_acquiring(
 #: A cluster is a group only if it holds this many times the detections that false alarms
 #: of the scan's density would put in its box (:func:`_standing_out`).
 GROUP_CONTRAST = 3.0
+
+
+def _among_individuals(
+    clusters: list[np.ndarray],
+    scan: Scan,
+    pg: _PointGates,
+    sigma: float,
+    moving: tuple[np.ndarray, np.ndarray],
+    spread: float,
+) -> list[np.ndarray]:
+    """The clusters (rows of the scan that a group would hold) less those that lie among
+    more individual targets than they hold detections. Cluster ``k`` of ``n`` detections
+    with mean ``z̄``, principal axes ``a₁, a₂`` and scatter eigenvalues ``λ₁, λ₂`` is dropped
+    (emptied: it restarts as a candidate) when
+
+        #{j ∉ cluster : |a_iᵀ (z_j − z̄)| ≤ ½ √(12 λ_i) + 2σ, i = 1, 2} > n
+
+    over the scan's detections ``z_j`` that a confirmed individual track explains one to one
+    (:attr:`_PointGates.explained`) and that move apart from the cluster's run: the track's
+    velocity more than ``spread`` plus twice the run's velocity std from the run's
+    (``moving``: each cluster's run velocity ``(K, 2)`` and std ``(K,)``, as
+    :func:`_group_clusters` has them; a convoy's own tracked vehicles do not count against
+    it). The box is :func:`_standing_out`'s, grown by two standard deviations ``sigma`` of
+    the noise each way. A crowd of pedestrians walking every way, each with their own track,
+    leaves a few detections that no track explains one to one (people side by side, false
+    alarms); chained at the resolution distance through the crowd they spanned a plaza, and
+    one group track over it took every person's detections."""
+    if not clusters or pg.det.size == 0:
+        return clusters
+    pairs = np.flatnonzero(pg.explained)
+    det, trk = pg.det[pairs], pg.trk[pairs]
+    v = np.take(pg.v, trk, axis=0)
+    run_v, run_sd = moving
+    out = []
+    for k, rows in enumerate(clusters):
+        if rows.size < 2 or det.size == 0:
+            out.append(rows)
+            continue
+        apart = np.hypot(*(v - run_v[k]).T) > spread + 2.0 * run_sd[k]
+        others = np.zeros(scan.size, dtype=bool)
+        others[det[apart]] = True
+        others[rows] = False
+        idx = np.flatnonzero(others)
+        if idx.size == 0:
+            out.append(rows)
+            continue
+        z = scan.z.take(rows, axis=0)
+        mean = z.mean(axis=0)
+        d = z - mean
+        lam, axes = np.linalg.eigh(d.T @ d / rows.size)
+        half = 0.5 * np.sqrt(12.0 * np.maximum(lam, 0.0)) + 2.0 * sigma
+        local = (scan.z.take(idx, axis=0) - mean) @ axes
+        inside = np.count_nonzero(np.all(np.abs(local) <= half, axis=1))
+        out.append(rows if inside <= rows.size else rows[:0])
+    return out
 
 
 def _standing_out(

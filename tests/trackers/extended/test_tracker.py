@@ -951,3 +951,53 @@ def test_gate_sets_of_a_few_shared_pairs_are_those_of_the_labelled_nodes(monkeyp
             assert a.tolist() == b.tolist(), trial
         shared += bool((few[0] > 1).any() or (few[1] > 1).any())
     assert shared >= 10  # scenes with pairs sharing a node
+
+
+def _plaza_after(heading: np.ndarray, seed: int = 3):
+    """30 people on a grid over 50 m x 30 m walking at 1.3 m/s along ``heading`` (one per
+    person), seen for 5 s at 10 Hz with 0.6 m of noise; then a scan with four detections
+    scattered among them and five in a corner no person is near. Returns the scan, the point
+    tracker's view of it and the rows of the scattered and the cornered detections."""
+    rng = np.random.default_rng(seed)
+    n = 30
+    p = np.stack([np.tile(np.linspace(5, 55, 6), 5), np.repeat(np.linspace(5, 35, 5), 6)], 1)
+    v = 1.3 * np.stack([np.cos(heading), np.sin(heading)], 1)
+    pipe = TrackingPipeline.all_kinds(TrackerConfig())
+    R_cam = np.eye(2) * 0.36
+    for k in range(50):
+        p = p + 0.1 * v
+        z = p + rng.normal(0, 0.6, p.shape)
+        pipe.process(Scan("cam", 0.1 * k, z, np.tile(R_cam, (n, 1, 1))))
+    p = p + 0.1 * v
+    spread = np.array([[4.0, 36.0], [20.0, 18.0], [38.0, 24.0], [56.0, 3.0]])
+    corner = np.array([80.0, 60.0]) + rng.normal(0, 1.0, (5, 2))
+    z = np.vstack([p + rng.normal(0, 0.6, p.shape), spread, corner])
+    scan = Scan("cam", 5.0, z, np.tile(R_cam, (len(z), 1, 1)))
+    view = pipe.point.predicted(scan.time)
+    assert int(np.count_nonzero(view.confirmed)) == n
+    return scan, view, np.arange(n, n + 4), np.arange(n + 4, n + 9)
+
+
+def test_a_cluster_among_more_individual_targets_than_its_detections_is_no_group():
+    """A camera's plaza: 30 people walking every way, each with a confirmed track. A
+    cluster of four detections that no track explains (false alarms, people side by side),
+    chained at the resolution distance through the crowd across the plaza, lies among more
+    individual targets than it holds: no group (one such cluster became an extended track
+    53 m x 37 m that took every person's detections). Five detections in a corner no person
+    is near stay a cluster. People walking all one way with the cluster's run are its
+    own, not individuals about it: the scattered cluster is kept then."""
+    from trackers.extended.tracker import _among_individuals, _PointGates
+
+    rng = np.random.default_rng(3)
+    scan, view, scattered, cornered = _plaza_after(rng.uniform(-math.pi, math.pi, 30))
+    still = (np.zeros((2, 2)), np.zeros(2))  # the runs' velocities and their stds
+    kept = _among_individuals(
+        [scattered, cornered], scan, _PointGates(view, scan), 0.6, still, 0.42
+    )
+    assert kept[0].size == 0
+    assert kept[1].tolist() == cornered.tolist()
+
+    scan, view, scattered, _ = _plaza_after(np.full(30, 0.5))
+    along = (np.tile(1.3 * np.array([math.cos(0.5), math.sin(0.5)]), (1, 1)), np.full(1, 0.5))
+    kept = _among_individuals([scattered], scan, _PointGates(view, scan), 0.6, along, 0.42)
+    assert kept[0].tolist() == scattered.tolist()
