@@ -204,6 +204,15 @@ class PipelineCheckpoint:
         )
 
 
+def _remember(table: dict[str, Any], sensor_id: str, value: Any) -> None:
+    """``table[sensor_id] = value``, the most recently heard sensor last, keeping the
+    :data:`MAX_MAPPED_SENSORS` most recently heard."""
+    table.pop(sensor_id, None)
+    table[sensor_id] = value
+    while len(table) > MAX_MAPPED_SENSORS:
+        table.pop(next(iter(table)))
+
+
 class TrackingPipeline:
     """Peers and the point tracker; one ``process`` call per scan, in time order."""
 
@@ -329,14 +338,12 @@ class TrackingPipeline:
         cov = scan.coverage
         polygon = None if cov is None or cov.polygon is None else cov.polygon
         sid = scan.sensor_id
-        last, taught = self._polygons.pop(sid, (None, None))
+        last, taught = self._polygons.get(sid, (None, None))
         if polygon is not None and taught is not None and not np.array_equal(polygon, taught):
             self._clutter.forget(sid)
             taught = None
         same = polygon is None or (last is not None and np.array_equal(polygon, last))
-        self._polygons[sid] = (polygon, polygon if same else taught)  # most recently heard last
-        while len(self._polygons) > MAX_MAPPED_SENSORS:
-            self._polygons.pop(next(iter(self._polygons)))
+        _remember(self._polygons, sid, (polygon, polygon if same else taught))
         return same
 
     def _map_disc(self, scan: Scan) -> bool:
@@ -351,10 +358,7 @@ class TrackingPipeline:
             else (*cov.centre.tolist(), float(cov.max_range))
         )
         known = self._discs.get(scan.sensor_id, disc)
-        self._discs.pop(scan.sensor_id, None)
-        self._discs[scan.sensor_id] = disc  # the most recently heard last
-        while len(self._discs) > MAX_MAPPED_SENSORS:
-            self._discs.pop(next(iter(self._discs)))
+        _remember(self._discs, scan.sensor_id, disc)
         if known != disc:
             self._clutter.forget(scan.sensor_id)
             return False

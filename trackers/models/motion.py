@@ -202,7 +202,7 @@ def agile_turn_rate(
     if T.ndim == 0:
         cap = MAX_AGILE_TURN_RATE if not T > 0.0 else min(MAX_AGILE_TURN_RATE, max_turn / float(T))
         if cap <= base:  # (a 4 s revisit, defaults)
-            return np.full(v.shape, float(base))
+            return np.full(shape, float(base))
     else:
         with np.errstate(divide="ignore", invalid="ignore"):
             cap = np.minimum(MAX_AGILE_TURN_RATE, np.where(T > 0.0, max_turn / T, np.inf))
