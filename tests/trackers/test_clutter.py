@@ -417,11 +417,13 @@ def test_a_clutter_patch_is_learned_through_the_tracks_it_starts(monkeypatch) ->
     about a third as many false tracks (8 runs: 3.0 a scan without, 1.1 with; single runs
     range from 0 to 7, so 4 runs, as this test had, gave a fifth or half by chance). Since a
     birth run may miss a scan, extended tracks hold more of the patch: summed over the 8
-    runs, 27.9 without and 6.8 with before, 10.2 and 2.4 now."""
+    runs, 27.9 without and 6.8 with before, 10.2 and 2.4 then; and since the extended
+    tracks weigh their detections against the scene's learned density (2026-11-27), which
+    the patch stands out from, they hold it better still: 1.5 and 0.03."""
     with_late = sum(_patch_false_tracks(s) for s in range(8))
     monkeypatch.setattr(ClutterMap, "settle", lambda self, accepted, rejected: None)
     without = sum(_patch_false_tracks(s) for s in range(8))
-    assert without > 6.0 and with_late < 0.45 * without
+    assert without > 1.0 and with_late < 0.1 * without
 
 
 def test_a_restored_state_forgets_the_held_detections() -> None:

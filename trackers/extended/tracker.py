@@ -15,7 +15,8 @@ Each scan (:meth:`ExtendedTracker.propose`, then :meth:`~ExtendedTracker.commit`
        ΔL(W) = ln Poisson(|W|; γ) + ln f(W) − |W| ln λ_fa
 
    (``f`` the joint density of the detections under the predicted centroid and extent,
-   ``γ`` the track's expected number of detections a scan, ``λ_fa`` the false-alarm density),
+   ``γ`` the track's expected number of detections a scan, ``λ_fa`` the false-alarm density:
+   the batch's, else the one the clutter map learned for its sensor's whole scene),
    against ``ΔL(∅) = −γ`` for no detection at all. The likeliest is the track's: its
    detections are *claimed* (they update no individual track and start none) and update the
    centroid and extent. ``L ← L + ΔL`` is the track's score, tested like an individual
@@ -816,8 +817,11 @@ class ExtendedTracker(SavesImmutableState):
         sigma = position_noise(scan.R)
         noise = remembered_noise(state.noise, scan.sensor_id, sigma, t)
         cfg = resolution_in_force(cfg, max((e[1] for e in noise), default=None))
-        lam = tm.clutter_density if scan.clutter_density is None else float(scan.clutter_density)
-        log_lam = math.log(lam)
+        # the false-alarm density a track's detections must beat: the batch's stated one,
+        # else the one its sensor's clutter map learned for the whole scene (what a cluster
+        # must beat to start a track, :func:`_standing_out`), else the configured one
+        lam = scan.clutter_density if scan.clutter_density is not None else scan.clutter_scene
+        log_lam = math.log(tm.clutter_density if lam is None else float(lam))
         next_id = state.next_id
         gates: _PointGates | None = None
 
@@ -1495,10 +1499,11 @@ def _likeliest(
 
         ΔL(W) = ln Poisson(|W|; γ) + ln f(W) − |W| ln λ_fa,    ΔL(∅) = −γ
 
-    (no detection at all is a candidate too). The candidates are the nested unions of
-    ``subsets`` (ranked by the Mahalanobis distance of each subset's centroid to the
-    predicted one, under ``H P Hᵀ + z X + R̄`` over the square root of the subset's size,
-    ``R̄`` the mean over all the subsets) and, when the subsets hold detections outside the
+    (no detection at all is a candidate too; ``log_lam`` = ln λ_fa). The candidates are the
+    nested unions of ``subsets`` (ranked by the Mahalanobis distance of each subset's
+    centroid to the predicted one, under ``H P Hᵀ + z X + R̄`` over the square root of the
+    subset's size, ``R̄`` the mean over all the subsets) and, when the subsets hold
+    detections outside the
     gate of an object smaller than the resolution distance (``inside`` not None: a
     resolution subset chains it to clutter, a buoy or another target up to a resolution
     distance away), the nested unions of the detections ``inside`` the gate alone, ranked by
