@@ -34,6 +34,12 @@ long-quiet area at a 51st of the configured density or more, so that a new false
 there is not a near-certain target.
 A target's detections count too until its track holds three of them, no more.
 
+A radar that reports its turn sector by sector (batches stating a sector of their own as
+``coverage``, or found to stream sectors without saying so:
+:meth:`~trackers.coverage.CoverageLearner.sweeping`) looks at each cell once a turn, not at
+every batch: its sectors' clutter detections are gathered (:meth:`ClutterMap.learn_sector`)
+until the sweep comes round, and then learned as one scan.
+
 Detections held back: those a tentative track of three or more detections took are held
 (:meth:`ClutterMap.hold`) until the track's fate is known (:meth:`ClutterMap.settle`). If
 the sequential test deletes it as no target, they were false alarms and count then, in
@@ -70,7 +76,13 @@ __all__ = [
     "SCENE_MARGIN",
     "SCENE_PRIOR_SCANS",
     "SCENE_SCANS",
+    "SWEEP_BATCHES",
+    "SWEEP_BINS",
+    "SWEEP_COMPLETE",
+    "SWEEP_MAX_POINTS",
+    "SWEEP_OVERLAP",
     "ClutterMap",
+    "arc_bins",
 ]
 
 #: A cell's side, in median position standard deviations of the sensor's detections.
@@ -106,7 +118,43 @@ HELD_SCANS = 300
 #: ... and so is the oldest beyond this many.
 MAX_HELD = 1 << 15
 
+#: Sectors of a revolution (batches that each looked at an arc of bearings about their
+#: sensor) are gathered until the sweep comes round: a batch whose arc overlaps by more than
+#: SWEEP_OVERLAP the arcs gathered since the last look, when these cover at least
+#: SWEEP_COMPLETE of the bearings the sensor's last SWEEP_BATCHES batches looked at, makes
+#: them one look at every cell; otherwise (a camera panning) they are dropped. The arcs are
+#: kept in SWEEP_BINS bins of bearing; at most SWEEP_MAX_POINTS detections wait.
+SWEEP_OVERLAP = 0.25
+SWEEP_COMPLETE = 0.9
+SWEEP_BATCHES = 32
+SWEEP_BINS = 360
+SWEEP_MAX_POINTS = 1 << 16
+
 _GAMMA = 1.0 - 1.0 / MEMORY_SCANS
+
+
+@dataclass
+class _Sweep:
+    """One sensor's sectors since its last look: the bins of bearing they covered
+    (``gathered``), their clutter detections (``waiting``, one array a batch) and the last
+    non-empty batch's covariances; and the bins of its last :data:`SWEEP_BATCHES` batches."""
+
+    gathered: np.ndarray = field(default_factory=lambda: np.zeros(SWEEP_BINS, dtype=bool))
+    waiting: list[np.ndarray] = field(default_factory=list)
+    points: int = 0
+    R: np.ndarray | None = None
+    recent: deque[np.ndarray] = field(default_factory=lambda: deque(maxlen=SWEEP_BATCHES))
+
+
+def arc_bins(start: float, width: float) -> np.ndarray:
+    """The :data:`SWEEP_BINS` bins of bearing that the arc from ``start`` over ``width``
+    (rad) touches, as a mask."""
+    step = 2.0 * np.pi / SWEEP_BINS
+    first = int(np.floor(start / step))
+    n = min(SWEEP_BINS, int(np.floor((start + width) / step)) - first + 1)
+    out = np.zeros(SWEEP_BINS, dtype=bool)
+    out[np.mod(np.arange(first, first + n), SWEEP_BINS)] = True
+    return out
 
 
 @dataclass
@@ -219,6 +267,8 @@ class ClutterMap:
         self._held: dict[int, list] = {}
         self._holding: dict[str, list[int]] = {}
         self._settled = 0
+        # each sweeping sensor's sectors since its last look, least recently heard first
+        self._sweeps: OrderedDict[str, _Sweep] = OrderedDict()
 
     @staticmethod
     def _cell_side(R: np.ndarray) -> float:
@@ -295,6 +345,48 @@ class ClutterMap:
                 grid.stamps[live],
             )
 
+    def learn_sector(
+        self,
+        sensor_id: str,
+        start: float,
+        width: float,
+        z_clutter: np.ndarray,
+        R: np.ndarray,
+    ) -> bool:
+        """Record one processed batch of ``sensor_id`` that looked at the arc of bearings
+        from ``start`` over ``width`` (rad) about the sensor (a sector of its revolution),
+        ``z_clutter`` and ``R`` as :meth:`learn` takes them. The sectors are gathered until
+        the sweep comes round (:data:`SWEEP_OVERLAP`, :data:`SWEEP_COMPLETE`), then
+        learned as one scan. Returns whether that happened now."""
+        sweep = self._sweeps.pop(sensor_id, None) or _Sweep()
+        self._sweeps[sensor_id] = sweep
+        while len(self._sweeps) > MAX_SENSORS:
+            self._sweeps.popitem(last=False)
+        bins = arc_bins(start, width)
+        sweep.recent.append(bins)
+        learned = False
+        if np.count_nonzero(bins & sweep.gathered) > SWEEP_OVERLAP * np.count_nonzero(bins):
+            looked = np.logical_or.reduce(np.array(sweep.recent))
+            complete = np.count_nonzero(sweep.gathered & looked) >= SWEEP_COMPLETE * (
+                np.count_nonzero(looked)
+            )
+            if complete and sweep.R is not None:
+                z = np.concatenate(sweep.waiting) if sweep.waiting else np.zeros((0, 2))
+                self.learn(sensor_id, z, sweep.R)
+                learned = True
+            sweep.gathered[:] = False
+            sweep.waiting, sweep.points = [], 0
+        z = np.asarray(z_clutter, dtype=float).reshape(-1, 2)
+        if sweep.points + z.shape[0] > SWEEP_MAX_POINTS:  # a sweep that never comes round
+            sweep.gathered[:] = False
+            sweep.waiting, sweep.points = [], 0
+        sweep.gathered |= bins
+        sweep.waiting.append(z)
+        sweep.points += z.shape[0]
+        if np.shape(R)[0]:
+            sweep.R = np.asarray(R, dtype=float)
+        return learned
+
     def hold(
         self,
         sensor_id: str,
@@ -364,6 +456,7 @@ class ClutterMap:
     def forget(self, sensor_id: str) -> None:
         """Start ``sensor_id``'s map afresh (what it looks at changed: the cells it no longer
         looks at would otherwise be counted as looked at and empty)."""
+        self._sweeps.pop(sensor_id, None)
         if self._grids.pop(sensor_id, None) is not None:
             self._drop_stale()
 

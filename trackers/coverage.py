@@ -15,7 +15,13 @@ standard deviations of the largest detection noise: a sensor is taken to look wh
 been seeing things, and one that has seen nothing in that while to look nowhere. When those
 scans gave the sensor's position, the box is cut to the disc about it (its latest position)
 of the farthest detection's range, grown a little: a radar's box would reach 41 % beyond
-its range at the corners. A lone sensor's scans cover everything, as before.
+its range at the corners. A lone sensor's scans cover everything, as before, but for a
+radar that streams its turn sector by sector without saying so: when the detections of each
+of its scans lie within a narrow arc of bearings about its position and those of its last
+scans together span a wide one (:meth:`CoverageLearner.sweeping`), each scan looked at the
+arc of its own detections, grown by the bearing noise, out to the range it reaches (one
+without a detection at nothing). Counted as a look everywhere, each of 16 sectors a turn
+missed every track outside it 15 times a turn, and a newcomer's radar kept no track at all.
 
 How much of a target's possible positions a scan looked at decides how much its silence
 says: :func:`visible_fraction` is the share of a Gaussian (a track's predicted position) and
@@ -39,10 +45,15 @@ __all__ = [
     "LEARN_SCANS",
     "MAX_SENSORS",
     "MAX_VERTICES",
+    "SECTOR_SCANS",
+    "SECTOR_SHARE",
+    "SECTOR_SPAN",
     "Coverage",
     "CoverageLearner",
+    "bearing_arc",
     "disc_fraction",
     "point_in_polygon",
+    "polygon_arc",
     "polygon_distance",
     "visible_fraction",
 ]
@@ -60,6 +71,18 @@ LEARN_SIGMAS = 3.0
 #: the farthest well within 1 % of its range, a sparser sensor's short of it (its scans then
 #: miss no track beyond: the cautious side).
 LEARN_RANGE_GROWTH = 0.02
+#: A sensor whose scans give its position streams its revolution sector by sector when, of
+#: its last LEARN_SCANS scans, at least SECTOR_SCANS had detections, none of which spans (in
+#: bearing about the sensor) more than SECTOR_SHARE of the arc that all of them span
+#: together, and that arc is at least SECTOR_SPAN wide ...
+SECTOR_SCANS = 8
+SECTOR_SHARE = 0.4
+SECTOR_SPAN = math.radians(60.0)
+#: ... and each of its scans then looked at the arc of its own detections, grown on each side
+#: by LEARN_SIGMAS standard deviations of the bearing noise of its nearest detection, at
+#: least SECTOR_MARGIN and at most SECTOR_MAX_MARGIN (rad).
+SECTOR_MARGIN = math.radians(0.5)
+SECTOR_MAX_MARGIN = math.radians(10.0)
 #: Point-in-polygon tests are done in blocks of at most this many points x vertices.
 CHUNK_CELLS = 1 << 18
 #: The most sensors remembered; beyond, the least recently heard is forgotten.
@@ -336,6 +359,8 @@ def disc_fraction(coverage: Coverage, centre: np.ndarray, radius: np.ndarray) ->
 #: One scan's detections: their box ``(x0, y0, x1, y1)``, largest noise σ (m) and the range of
 #: the farthest from the sensor's position (m; None when the scan gave none), or None.
 Box = tuple[float, float, float, float, float, float | None] | None
+#: The arc of bearings ``(start, width)`` (rad) a scan's detections span about its sensor.
+Arc = tuple[float, float] | None
 #: What a :class:`CoverageLearner` knows, least recently heard sensor first: each sensor's id,
 #: when it was last heard and the boxes of its last :data:`LEARN_SCANS` scans.
 LearnerSnapshot = tuple[tuple[str, float, tuple[Box, ...]], ...]
@@ -344,6 +369,79 @@ LearnerSnapshot = tuple[tuple[str, float, tuple[Box, ...]], ...]
 def _finite(value: Any) -> bool:
     """Whether a JSON value is a finite number (not a bool)."""
     return isinstance(value, int | float) and not isinstance(value, bool) and math.isfinite(value)
+
+
+def _arc(bearings: np.ndarray) -> tuple[float, float]:
+    """The shortest arc ``(start, width)`` (rad, ``start`` in [0, 2π)) holding every one of
+    ``bearings`` (rad, at least one): the circle less its widest gap between neighbours."""
+    b = np.sort(np.mod(bearings, 2.0 * math.pi))
+    gaps = np.empty_like(b)
+    np.subtract(b[1:], b[:-1], out=gaps[:-1])
+    gaps[-1] = b[0] + 2.0 * math.pi - b[-1]
+    k = int(gaps.argmax())
+    return float(b[(k + 1) % b.size]), float(2.0 * math.pi - gaps[k])
+
+
+def bearing_arc(points: np.ndarray, position: np.ndarray) -> tuple[float, float]:
+    """The shortest arc ``(start, width)`` (rad) of the bearings of ``points (N ≥ 1, 2)``
+    about ``position``."""
+    d = np.asarray(points, dtype=float).reshape(-1, 2) - np.asarray(position, dtype=float)
+    return _arc(np.arctan2(d[:, 1], d[:, 0]))
+
+
+def polygon_arc(polygon: np.ndarray, position: np.ndarray) -> tuple[float, float] | None:
+    """The arc of bearings about ``position`` that ``polygon`` spans (its vertices' but for
+    one at ``position``, a sector's apex), or ``None`` when ``position`` is inside it, off
+    its edge (all bearings)."""
+    poly = np.asarray(polygon, dtype=float)
+    at = np.asarray(position, dtype=float).reshape(1, 2)
+    scale = float(np.max(np.abs(poly - at)))
+    if polygon_distance(at, poly)[0] > 1e-9 * scale and point_in_polygon(at, poly)[0]:
+        return None
+    d = poly - at
+    away = np.hypot(d[:, 0], d[:, 1]) > 1e-9 * scale
+    return bearing_arc(poly[away], at) if away.any() else None
+
+
+def _arc_of(z: np.ndarray, R: np.ndarray, position: np.ndarray) -> tuple[Arc, float, float]:
+    """The arc of bearings of detections ``z`` (at least one) about ``position``, the range
+    of the nearest and the largest position noise standard deviation of ``R``."""
+    d = z - np.asarray(position, dtype=float).reshape(1, 2)
+    ranges = np.hypot(d[:, 0], d[:, 1])
+    off = np.abs(R[:, 0, 1])
+    sigma = math.sqrt(max(float((R[:, 0, 0] + off).max()), float((R[:, 1, 1] + off).max())))
+    return _arc(np.arctan2(d[:, 1], d[:, 0])), float(ranges.min()), sigma
+
+
+def _bearings(z: np.ndarray, position: np.ndarray) -> np.ndarray:
+    p = position.reshape(2)
+    return np.arctan2(z[:, 1] - p[1], z[:, 0] - p[0])
+
+
+def _sweeping(arcs: tuple[Arc, ...]) -> bool:
+    """Whether the scans of ``arcs`` (None: no detections or no position) are sectors of a
+    revolution (:data:`SECTOR_SCANS`, :data:`SECTOR_SHARE`, :data:`SECTOR_SPAN`)."""
+    seen = [a for a in arcs if a is not None]
+    if len(seen) < SECTOR_SCANS:
+        return False
+    widest = max(w for _, w in seen)
+    if widest > SECTOR_SHARE * 2.0 * math.pi:
+        return False
+    ends = np.array([s for s, _ in seen] + [s + w for s, w in seen])
+    span = _arc(ends)[1]
+    return span >= SECTOR_SPAN and widest <= SECTOR_SHARE * span
+
+
+def _wedge(centre: np.ndarray, start: float, width: float, r: float) -> np.ndarray:
+    """The polygon of the wedge from ``centre`` over bearings ``start`` to ``start + width``
+    (rad) reaching past the circle of radius ``r``: its arc's vertices at ``r / cos(δ/2)``,
+    ``δ`` their angular step, so that the chords stay outside the circle."""
+    n = max(2, math.ceil(width / math.radians(5.0)) + 1)
+    a = np.linspace(start, start + width, n)
+    reach = r / math.cos(0.5 * width / (n - 1))
+    c = np.asarray(centre, dtype=float).reshape(2)
+    arc = c + reach * np.column_stack([np.cos(a), np.sin(a)])
+    return np.vstack([c, arc])
 
 
 class CoverageLearner:
@@ -360,6 +458,12 @@ class CoverageLearner:
         self._heard: OrderedDict[str, float] = OrderedDict()
         #: each sensor's position as its last scan that gave one gave it (not saved)
         self._positions: dict[str, np.ndarray] = {}
+        #: the arcs of each sensor's last LEARN_SCANS scans (not saved: relearned in as many),
+        #: for how many more scans one of them spans too much for a sector (wider than
+        #: SECTOR_SHARE of the circle), and whether they are sectors of a revolution
+        self._arcs: dict[str, tuple[Arc, ...]] = {}
+        self._wide: dict[str, int] = {}
+        self._sweeping: dict[str, bool] = {}
 
     @staticmethod
     def _box(z: np.ndarray, R: np.ndarray, position: np.ndarray | None = None) -> Box:
@@ -392,7 +496,8 @@ class CoverageLearner:
         position: np.ndarray | None = None,
     ) -> Coverage | None:
         """The learned coverage of a scan of ``sensor_id`` at ``t`` with detections ``z``,
-        ``R`` from a sensor at ``position`` (if given): ``None`` (everywhere) while no other
+        ``R`` from a sensor at ``position`` (if given): that of a sector (:meth:`_sector`)
+        when the sensor streams sectors; else ``None`` (everywhere) while no other
         sensor has been heard in the last :data:`FORGET_AFTER` seconds;
         :meth:`Coverage.none` when neither it nor the sensor's last :data:`LEARN_SCANS`
         scans hold a detection. When every one of those scans with a detection gave the
@@ -403,8 +508,11 @@ class CoverageLearner:
         ``r_max`` the farthest detection's range (from the sensor's position at its scan):
         a radar's box reaches 41 % beyond its range at the corners, where another radar's
         targets would be missed at each of its scans."""
+        sector = self._sector(sensor_id, z, R, position)
         if not self._several(sensor_id, t):
-            return None
+            return sector
+        if sector is not None:
+            return sector
         boxes = [b for b in self._boxes.get(sensor_id, ()) if b is not None]
         now = self._box(z, R, position)
         if now is not None:
@@ -429,6 +537,41 @@ class CoverageLearner:
             max_range=max(r, 1e-9),
         )
 
+    def sweeping(self, sensor_id: str) -> bool:
+        """Whether ``sensor_id``'s last scans are sectors of a revolution (:data:`SECTOR_SCANS`,
+        :data:`SECTOR_SHARE`, :data:`SECTOR_SPAN`): each scan's detections within a narrow arc
+        of bearings about the sensor, the arcs of its scans together a wide one."""
+        return self._sweeping.get(sensor_id, False)
+
+    def _sector(
+        self, sensor_id: str, z: np.ndarray, R: np.ndarray, position: np.ndarray | None
+    ) -> Coverage | None:
+        """For a scan of a sensor that streams sectors (:meth:`sweeping`, this scan's arc
+        counted in), the wedge of its detections' arc about ``position`` grown by the bearing
+        noise (:data:`SECTOR_MARGIN`), out to the range its scans reach (cut by that disc);
+        :meth:`Coverage.none` for one without detections; ``None`` for any other scan (no
+        position, or a sensor that does not stream sectors)."""
+        if position is None or self._wide.get(sensor_id, 0) > 1:
+            return None  # (a scan in the window with this one spans too wide an arc)
+        arcs = self._arcs.get(sensor_id, ())
+        if z.shape[0] == 0:
+            return Coverage.none(learned=True) if self.sweeping(sensor_id) else None
+        arc, near, sigma = _arc_of(z, R, position)
+        if not _sweeping((*arcs[-(LEARN_SCANS - 1) :], arc)):
+            return None
+        boxes = [b for b in self._boxes.get(sensor_id, ()) if b is not None and b[5] is not None]
+        far = float(np.max(np.hypot(*(z - np.asarray(position, dtype=float).reshape(1, 2)).T)))
+        reach = max([far] + [b[5] for b in boxes])
+        r = (1.0 + LEARN_RANGE_GROWTH) * reach + LEARN_SIGMAS * sigma
+        margin = min(SECTOR_MAX_MARGIN, max(SECTOR_MARGIN, LEARN_SIGMAS * sigma / max(near, 1e-9)))
+        start, width = arc
+        return Coverage(
+            polygon=_wedge(position, start - margin, width + 2.0 * margin, r),
+            centre=np.asarray(position, dtype=float).reshape(2),
+            max_range=max(r, 1e-9),
+            learned=True,
+        )
+
     def learn(
         self,
         sensor_id: str,
@@ -442,6 +585,16 @@ class CoverageLearner:
         self._heard.move_to_end(sensor_id)
         kept = self._boxes.get(sensor_id, ())[-(LEARN_SCANS - 1) :]
         self._boxes[sensor_id] = (*kept, self._box(z, R, position))
+        arc = None
+        if position is not None and z.shape[0]:
+            arc = _arc(_bearings(z, np.asarray(position, dtype=float)))
+        arcs = (*self._arcs.get(sensor_id, ())[-(LEARN_SCANS - 1) :], arc)
+        self._arcs[sensor_id] = arcs
+        if arc is not None and arc[1] > SECTOR_SHARE * 2.0 * math.pi:
+            self._wide[sensor_id] = LEARN_SCANS
+        else:
+            self._wide[sensor_id] = max(0, self._wide.get(sensor_id, 0) - 1)
+        self._sweeping[sensor_id] = self._wide[sensor_id] == 0 and _sweeping(arcs)
         if position is not None:
             self._positions[sensor_id] = np.asarray(position, dtype=float).reshape(2).copy()
         while len(self._heard) > MAX_SENSORS:
@@ -454,6 +607,9 @@ class CoverageLearner:
         del self._heard[sensor_id]
         self._boxes.pop(sensor_id, None)
         self._positions.pop(sensor_id, None)
+        self._arcs.pop(sensor_id, None)
+        self._wide.pop(sensor_id, None)
+        self._sweeping.pop(sensor_id, None)
 
     def snapshot(self) -> LearnerSnapshot:
         """What the learner knows now, immutable (its boxes are shared, not copied)."""

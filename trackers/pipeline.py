@@ -26,7 +26,7 @@ import numpy as np
 from trackers.clutter import MAX_SENSORS as MAX_MAPPED_SENSORS
 from trackers.clutter import ClutterMap
 from trackers.config import TrackerConfig
-from trackers.coverage import CoverageLearner, LearnerSnapshot
+from trackers.coverage import CoverageLearner, LearnerSnapshot, bearing_arc, polygon_arc
 from trackers.extended.tracker import ExtendedTracker
 from trackers.formation.tracker import FormationTracker
 from trackers.individual import IndividualTracker
@@ -381,11 +381,29 @@ class TrackingPipeline:
         # alone (``max_range``) is a whole revolution: its cells beyond the range never see a
         # detection, and are never looked at either while the disc stays where it is; when
         # it moves or changes, the sensor's map starts afresh.
+        # A sector of a revolution (a polygon other than the previous batch's, about the
+        # sensor's position, or the detections of a sensor that streams sectors without
+        # saying so) is gathered with the rest of its sweep, which teaches the map once.
         whole = self._same_view(scan)
-        if mapped and whole and scan.size and self._map_disc(scan):
+        arc = None
+        position = scan.sensor_position
+        if position is not None:
+            cov = scan.coverage
+            if cov is not None and cov.polygon is not None:
+                arc = None if whole else polygon_arc(cov.polygon, position)
+            elif self._coverage.sweeping(scan.sensor_id):
+                whole = False
+                arc = bearing_arc(scan.z, position) if scan.size else None
+        sector = arc is not None
+        if mapped and (sector or (whole and scan.size)) and self._map_disc(scan):
             mask = point.clutter
             clutter = rows if mask is None else rows[np.asarray(mask, dtype=bool)]
-            self._clutter.learn(scan.sensor_id, scan.z.take(clutter, axis=0), scan.R)
+            if arc is not None:
+                self._clutter.learn_sector(
+                    scan.sensor_id, *arc, scan.z.take(clutter, axis=0), scan.R
+                )
+            else:
+                self._clutter.learn(scan.sensor_id, scan.z.take(clutter, axis=0), scan.R)
             held = point.held
             if held.rows.size:
                 z = scan.z.take(rows.take(held.rows), axis=0)

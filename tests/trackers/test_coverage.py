@@ -619,3 +619,103 @@ def test_a_stated_range_teaches_the_clutter_map_until_it_changes() -> None:
     for k in range(5):
         fixed.process(batch(4.0 * k, 20e3, polygon=1e5))
     assert fixed._clutter._grids["r"].scans == 4
+
+
+def _sectors(rng, revolutions, sectors=16, clutter=2.0, targets=()):
+    """A radar at the origin turning once in 4 s and reporting ``sectors`` batches a turn,
+    each with the detections of its sector only (``clutter`` uniform false alarms a sector
+    within 20 km, and those of ``targets``, callables of time giving a position), its
+    position given, no coverage stated: ``(time, z)`` a batch."""
+    for k in range(revolutions):
+        for s in range(sectors):
+            a0, a1 = 2 * np.pi * s / sectors, 2 * np.pi * (s + 1) / sectors
+            t = 4.0 * k + 4.0 * (s + 1) / sectors
+            n = rng.poisson(clutter)
+            r, a = np.sqrt(rng.uniform(0, 2e4**2, n)), rng.uniform(a0, a1, n)
+            z = [np.column_stack([r * np.cos(a), r * np.sin(a)])]
+            for target in targets:
+                x = np.asarray(target(t))
+                b = np.mod(np.arctan2(x[1], x[0]), 2 * np.pi)
+                if a0 <= b < a1:
+                    z.append(x[None, :] + rng.normal(0, 30.0, (1, 2)))
+            yield t, np.vstack(z)
+
+
+def test_a_radar_streaming_sectors_is_seen_to_sweep_and_each_batch_looks_at_its_own():
+    """Sixteen batches a turn, no coverage stated: after eight with detections the learner
+    takes each batch to have looked at the arc of its own detections (grown by the bearing
+    noise) out to the radar's range, and an empty one at nothing; a track in another sector
+    is not in view."""
+    rng = np.random.default_rng(1)
+    learner = CoverageLearner()
+    pos = np.zeros(2)
+    seen = []
+    for t, z in _sectors(rng, 3):
+        R = np.tile(np.eye(2) * 900.0, (len(z), 1, 1))
+        seen.append((learner.coverage("r", t, z, R, pos), z))
+        learner.learn("r", t, z, R, pos)
+    assert learner.sweeping("r")
+    assert seen[0][0] is None  # a lone sensor's first batches: everywhere, as before
+    cov, z = seen[-1]
+    assert cov.learned and cov.contains(z).all()
+    bearing = np.arctan2(z[:, 1], z[:, 0])
+    mid = np.mean(np.unwrap(bearing))
+    other = 10e3 * np.array([[np.cos(mid + np.pi / 2), np.sin(mid + np.pi / 2)]])
+    assert not cov.contains(other)[0]
+    assert not cov.contains(np.array([[3e4 * np.cos(mid), 3e4 * np.sin(mid)]]))[0]  # beyond
+    empty = learner.coverage("r", 100.0, np.zeros((0, 2)), np.zeros((0, 2, 2)), pos)
+    assert empty is not None and empty.nowhere
+
+
+@pytest.mark.parametrize("pd", [0.9, 0.4])
+def test_a_radar_reporting_whole_turns_is_not_taken_for_sectors(pd):
+    """One batch a turn: with clutter, and with only two aircraft half a turn apart (some
+    batches see one of them, others both), the batches span the same arc as all of them
+    together: no sweep, a lone sensor's batches cover everything."""
+    rng = np.random.default_rng(2)
+    learner = CoverageLearner()
+    for k in range(40):
+        z = [rng.uniform(-2e4, 2e4, (rng.poisson(5), 2))] if k % 2 else []
+        for x in ([10e3, 1e3], [-10e3, -2e3]):
+            if rng.random() < pd:
+                z.append(np.array([x]) + rng.normal(0, 30, (1, 2)))
+        z = np.vstack(z) if z else np.zeros((0, 2))
+        R = np.tile(np.eye(2) * 900.0, (len(z), 1, 1))
+        assert learner.coverage("r", 4.0 * k, z, R, np.zeros(2)) is None
+        learner.learn("r", 4.0 * k, z, R, np.zeros(2))
+        assert not learner.sweeping("r")
+
+
+def test_tracks_of_a_radar_streaming_sectors_without_coverage_live():
+    """A newcomer's radar publishing each turn as 16 sector batches without a coverage: each
+    batch had missed every track outside its sector, 15 misses a turn, and no track lived
+    (held 0.0 of the target-batches); each batch now looks at its own detections' arc."""
+    rng = np.random.default_rng(3)
+    targets = [
+        lambda t: (5e3 + 8.0 * t, 5e3 + 3.0 * t),
+        lambda t: (-6e3 - 5.0 * t, 2e3 + 10.0 * t),
+        lambda t: (-8e3 + 150.0 * t, -8e3 + 20.0 * t),
+    ]
+    p = TrackingPipeline.all_kinds()
+    held = []
+    for t, z in _sectors(rng, 40, clutter=0.6, targets=targets):
+        scan = Scan("r", t, z, np.tile(np.eye(2) * 900.0, (len(z), 1, 1)))
+        scan = replace(scan, sensor_position=np.zeros(2))
+        out = p.process(scan).confirmed()
+        if t > 40.0:
+            pos = np.array([c.position for c in out]).reshape(-1, 2)
+            for target in targets:
+                x = np.asarray(target(t))
+                held.append(pos.size > 0 and np.hypot(*(pos - x).T).min() < 300.0)
+    assert np.mean(held) > 0.95
+
+
+def test_a_sectors_arc_leaves_out_its_apex_and_a_polygon_about_the_sensor_is_all_round():
+    from trackers.coverage import polygon_arc
+
+    wedge = np.array([[0.0, 0.0], [100.0, 0.0], [100.0, 100.0]])
+    start, width = polygon_arc(wedge, np.zeros(2))
+    assert start == pytest.approx(0.0) and width == pytest.approx(np.pi / 4)
+    assert polygon_arc(SQUARE, np.array([5.0, 5.0])) is None
+    start, width = polygon_arc(SQUARE, np.array([-10.0, 5.0]))
+    assert width == pytest.approx(2 * np.arctan(5.0 / 10.0))
