@@ -496,7 +496,7 @@ class CoverageLearner:
         position: np.ndarray | None = None,
     ) -> Coverage | None:
         """The learned coverage of a scan of ``sensor_id`` at ``t`` with detections ``z``,
-        ``R`` from a sensor at ``position`` (if given): that of a sector (:meth:`_sector`)
+        ``R`` from a sensor at ``position`` (if given): that of a sector (:meth:`sector`)
         when the sensor streams sectors; else ``None`` (everywhere) while no other
         sensor has been heard in the last :data:`FORGET_AFTER` seconds;
         :meth:`Coverage.none` when neither it nor the sensor's last :data:`LEARN_SCANS`
@@ -508,7 +508,7 @@ class CoverageLearner:
         ``r_max`` the farthest detection's range (from the sensor's position at its scan):
         a radar's box reaches 41 % beyond its range at the corners, where another radar's
         targets would be missed at each of its scans."""
-        sector = self._sector(sensor_id, z, R, position)
+        sector = self.sector(sensor_id, z, R, position)
         if not self._several(sensor_id, t):
             return sector
         if sector is not None:
@@ -543,7 +543,7 @@ class CoverageLearner:
         of bearings about the sensor, the arcs of its scans together a wide one."""
         return self._sweeping.get(sensor_id, False)
 
-    def _sector(
+    def sector(
         self, sensor_id: str, z: np.ndarray, R: np.ndarray, position: np.ndarray | None
     ) -> Coverage | None:
         """For a scan of a sensor that streams sectors (:meth:`sweeping`, this scan's arc

@@ -535,8 +535,12 @@ class IndividualTracker:
         status = sequential_test(tracks.score, tracks.peak, tracks.confirmed, coast, tm)
         delete = status.delete
         delete[n_old:] = False  # a track is never deleted in the scan that starts or adopts it
-        if idle.size:  # out of view: their scores stand, only coasting ends them
-            delete[idle] &= coast[idle] > tm.max_coast_time
+        if idle.size:
+            # out of view: their scores stand, and coasting ends them only a revisit past
+            # the limit, so that a sensor looks at them again first (a radar reporting its
+            # turn sector by sector looks at a track once a turn, not at each batch)
+            late = t - tracks.updated[idle] - _revisit_time(tracks, pd_coast, interval)[idle]
+            delete[idle] &= late * rate[idle] > tm.max_coast_time
         tested = delete.copy()  # deleted by the sequential test
         if idle.size:
             tested[idle] = False  # coasted out of view: no verdict on its detections
@@ -1707,11 +1711,17 @@ def _coast_rate(
     ``revisits`` revisits take longer than ``max_coast`` (a revisit over 4 s with the
     defaults and ``P_D`` 0.9, ``revisits`` 2.5), and then lets a track coast through that
     many revisits."""
+    reach = np.where(tracks.confirmed, revisits * _revisit_time(tracks, pd, sensor_interval), 0.0)
+    return np.minimum(1.0, max_coast / np.maximum(reach, max_coast))
+
+
+def _revisit_time(tracks: TrackArrays, pd: float, sensor_interval: float = 0.0) -> np.ndarray:
+    """``T̂ = max(P_D Δ̄, min(T_s, Δ̄))``, each track's sensor revisit as :func:`_coast_rate`
+    reads it (``P_D Δ̄`` only for tracks with detections of :data:`COAST_MIN_INSTANTS`
+    instants or more)."""
     gap = _mean_gap(tracks)
     own = np.where(tracks.instants >= COAST_MIN_INSTANTS, pd * gap, 0.0)
-    seen = np.minimum(sensor_interval, gap)
-    reach = np.where(tracks.confirmed, revisits * np.maximum(own, seen), 0.0)
-    return np.minimum(1.0, max_coast / np.maximum(reach, max_coast))
+    return np.maximum(own, np.minimum(sensor_interval, gap))
 
 
 #: A track coasts past MIN_MISSES − ½ revisits only while fewer false alarms than this are

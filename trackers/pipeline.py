@@ -417,12 +417,22 @@ class TrackingPipeline:
         check_scan(scan, self._last_time)
         given = scan
         learned: dict[str, Any] = {}
-        if scan.coverage is None:
+        stated = scan.coverage
+        if stated is None:
             coverage = self._coverage.coverage(
                 scan.sensor_id, scan.time, scan.z, scan.R, scan.sensor_position
             )
             if coverage is not None:
                 learned["coverage"] = coverage
+        elif stated.polygon is None and not stated.nowhere:
+            # a range alone, from a radar that streams sectors: the sector within it
+            sector = self._coverage.sector(scan.sensor_id, scan.z, scan.R, scan.sensor_position)
+            if sector is not None:
+                learned["coverage"] = (
+                    sector
+                    if sector.nowhere
+                    else replace(sector, centre=stated.centre, max_range=stated.max_range)
+                )
         tm = self.point.config.track_management
         mapped = scan.clutter_density is None and tm.clutter_map
         if mapped:
