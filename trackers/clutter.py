@@ -81,6 +81,8 @@ __all__ = [
     "SWEEP_COMPLETE",
     "SWEEP_MAX_POINTS",
     "SWEEP_OVERLAP",
+    "SWEEP_SHARE",
+    "SWEEP_SPAN",
     "ClutterMap",
     "arc_bins",
 ]
@@ -120,15 +122,18 @@ MAX_HELD = 1 << 15
 
 #: Sectors of a revolution (batches that each looked at an arc of bearings about their
 #: sensor) are gathered until the sweep comes round: a batch whose arc overlaps by more than
-#: SWEEP_OVERLAP the arcs gathered since the last look, when these cover at least
-#: SWEEP_COMPLETE of the bearings the sensor's last SWEEP_BATCHES batches looked at, makes
-#: them one look at every cell; otherwise (a camera panning) they are dropped. The arcs are
-#: kept in SWEEP_BINS bins of bearing; at most SWEEP_MAX_POINTS detections wait.
+#: SWEEP_OVERLAP the arcs gathered since the last look (but for the previous batch's), when
+#: these cover at least SWEEP_COMPLETE of the bearings the sensor's last SWEEP_BATCHES
+#: batches looked at and at least SWEEP_SPAN, none of them more than SWEEP_SHARE of it,
+#: makes them one look at every cell; otherwise (a camera panning) they are dropped. The
+#: arcs are kept in SWEEP_BINS bins of bearing; at most SWEEP_MAX_POINTS detections wait.
 SWEEP_OVERLAP = 0.25
 SWEEP_COMPLETE = 0.9
 SWEEP_BATCHES = 32
 SWEEP_BINS = 360
-SWEEP_MAX_POINTS = 1 << 16
+SWEEP_SPAN = 60
+SWEEP_SHARE = 0.4
+SWEEP_MAX_POINTS = 1 << 14
 
 _GAMMA = 1.0 - 1.0 / MEMORY_SCANS
 
@@ -142,8 +147,27 @@ class _Sweep:
     gathered: np.ndarray = field(default_factory=lambda: np.zeros(SWEEP_BINS, dtype=bool))
     waiting: list[np.ndarray] = field(default_factory=list)
     points: int = 0
+    #: the most bins one gathered batch covered
+    widest: int = 0
     R: np.ndarray | None = None
     recent: deque[np.ndarray] = field(default_factory=lambda: deque(maxlen=SWEEP_BATCHES))
+    #: the previous batch's bins, and the arc of its detections (``swept`` batches)
+    last: np.ndarray = field(default_factory=lambda: np.zeros(SWEEP_BINS, dtype=bool))
+    arc: tuple[float, float] | None = None
+
+
+def _swept(before: tuple[float, float], now: tuple[float, float]) -> tuple[float, float]:
+    """The arc the sweep passed over from the arc ``before`` to ``now`` (``(start, width)``,
+    rad), turning whichever way is shorter, less than half a turn; ``now`` when neither."""
+    s0, w0 = before
+    s1, w1 = now
+    ahead = (s1 - (s0 + w0)) % (2.0 * np.pi)  # from the end of ``before`` to ``now``
+    behind = (s0 - (s1 + w1)) % (2.0 * np.pi)  # from the end of ``now`` to ``before``
+    if ahead <= behind and ahead < np.pi:
+        return s0 + w0, ahead + w1
+    if behind < np.pi:
+        return s1, w1 + behind
+    return now
 
 
 def arc_bins(start: float, width: float) -> np.ndarray:
@@ -352,39 +376,54 @@ class ClutterMap:
         width: float,
         z_clutter: np.ndarray,
         R: np.ndarray,
+        *,
+        swept: bool = False,
     ) -> bool:
         """Record one processed batch of ``sensor_id`` that looked at the arc of bearings
         from ``start`` over ``width`` (rad) about the sensor (a sector of its revolution),
-        ``z_clutter`` and ``R`` as :meth:`learn` takes them. The sectors are gathered until
-        the sweep comes round (:data:`SWEEP_OVERLAP`, :data:`SWEEP_COMPLETE`), then
-        learned as one scan. Returns whether that happened now."""
+        ``z_clutter`` and ``R`` as :meth:`learn` takes them; ``swept``: the arc is that of
+        the batch's detections, and the sweep passed over the bearings between the previous
+        batch's and it too. The sectors are gathered until the sweep comes round
+        (:data:`SWEEP_OVERLAP`, :data:`SWEEP_COMPLETE`, :data:`SWEEP_SPAN`,
+        :data:`SWEEP_SHARE`), then learned as one scan. Returns whether that happened now."""
         sweep = self._sweeps.pop(sensor_id, None) or _Sweep()
         self._sweeps[sensor_id] = sweep
         while len(self._sweeps) > MAX_SENSORS:
             self._sweeps.popitem(last=False)
+        own = (start, width)
+        if swept and sweep.arc is not None:
+            start, width = _swept(sweep.arc, own)
+        sweep.arc = own if swept else None
         bins = arc_bins(start, width)
         sweep.recent.append(bins)
         learned = False
-        if np.count_nonzero(bins & sweep.gathered) > SWEEP_OVERLAP * np.count_nonzero(bins):
+        earlier = sweep.gathered & ~sweep.last
+        if np.count_nonzero(bins & earlier) > SWEEP_OVERLAP * np.count_nonzero(bins):
             looked = np.logical_or.reduce(np.array(sweep.recent))
-            complete = np.count_nonzero(sweep.gathered & looked) >= SWEEP_COMPLETE * (
-                np.count_nonzero(looked)
+            span = np.count_nonzero(sweep.gathered)
+            complete = (
+                np.count_nonzero(sweep.gathered & looked)
+                >= SWEEP_COMPLETE * np.count_nonzero(looked)
+                and span >= SWEEP_SPAN
+                and sweep.widest <= SWEEP_SHARE * span
             )
             if complete and sweep.R is not None:
                 z = np.concatenate(sweep.waiting) if sweep.waiting else np.zeros((0, 2))
                 self.learn(sensor_id, z, sweep.R)
                 learned = True
             sweep.gathered[:] = False
-            sweep.waiting, sweep.points = [], 0
+            sweep.waiting, sweep.points, sweep.widest = [], 0, 0
         z = np.asarray(z_clutter, dtype=float).reshape(-1, 2)
         if sweep.points + z.shape[0] > SWEEP_MAX_POINTS:  # a sweep that never comes round
             sweep.gathered[:] = False
-            sweep.waiting, sweep.points = [], 0
+            sweep.waiting, sweep.points, sweep.widest = [], 0, 0
         sweep.gathered |= bins
+        sweep.last = bins
+        sweep.widest = max(sweep.widest, int(np.count_nonzero(bins)))
         sweep.waiting.append(z)
         sweep.points += z.shape[0]
         if np.shape(R)[0]:
-            sweep.R = np.asarray(R, dtype=float)
+            sweep.R = np.asarray(R, dtype=float)[:256].copy()  # (its noise sizes the cells)
         return learned
 
     def hold(

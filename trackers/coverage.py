@@ -363,7 +363,7 @@ Box = tuple[float, float, float, float, float, float | None] | None
 Arc = tuple[float, float] | None
 #: What a :class:`CoverageLearner` knows, least recently heard sensor first: each sensor's id,
 #: when it was last heard and the boxes of its last :data:`LEARN_SCANS` scans.
-LearnerSnapshot = tuple[tuple[str, float, tuple[Box, ...]], ...]
+LearnerSnapshot = tuple[tuple[str, float, tuple[Box, ...], tuple[Arc, ...]], ...]
 
 
 def _finite(value: Any) -> bool:
@@ -379,7 +379,7 @@ def _arc(bearings: np.ndarray) -> tuple[float, float]:
     np.subtract(b[1:], b[:-1], out=gaps[:-1])
     gaps[-1] = b[0] + 2.0 * math.pi - b[-1]
     k = int(gaps.argmax())
-    return float(b[(k + 1) % b.size]), float(2.0 * math.pi - gaps[k])
+    return float(b[(k + 1) % b.size]), max(0.0, float(2.0 * math.pi - gaps[k]))
 
 
 def bearing_arc(points: np.ndarray, position: np.ndarray) -> tuple[float, float]:
@@ -410,26 +410,31 @@ def _arc_of(z: np.ndarray, R: np.ndarray, position: np.ndarray) -> tuple[Arc, fl
     ranges = np.hypot(d[:, 0], d[:, 1])
     off = np.abs(R[:, 0, 1])
     sigma = math.sqrt(max(float((R[:, 0, 0] + off).max()), float((R[:, 1, 1] + off).max())))
-    return _arc(np.arctan2(d[:, 1], d[:, 0])), float(ranges.min()), sigma
-
-
-def _bearings(z: np.ndarray, position: np.ndarray) -> np.ndarray:
-    p = position.reshape(2)
-    return np.arctan2(z[:, 1] - p[1], z[:, 0] - p[0])
+    away = ranges > LEARN_SIGMAS * sigma  # a detection at the sensor has no bearing
+    if not away.any():
+        return None, 0.0, sigma
+    d = d[away]
+    return _arc(np.arctan2(d[:, 1], d[:, 0])), float(ranges[away].min()), sigma
 
 
 def _sweeping(arcs: tuple[Arc, ...]) -> bool:
     """Whether the scans of ``arcs`` (None: no detections or no position) are sectors of a
-    revolution (:data:`SECTOR_SCANS`, :data:`SECTOR_SHARE`, :data:`SECTOR_SPAN`)."""
-    seen = [a for a in arcs if a is not None]
+    revolution (:data:`SECTOR_SCANS`, :data:`SECTOR_SHARE`, :data:`SECTOR_SPAN`), the widest
+    of them left out (one odd scan does not stop a sweep)."""
+    seen = sorted((a for a in arcs if a is not None), key=lambda a: a[1])[:-1]
     if len(seen) < SECTOR_SCANS:
         return False
-    widest = max(w for _, w in seen)
+    widest = seen[-1][1]
     if widest > SECTOR_SHARE * 2.0 * math.pi:
         return False
     ends = np.array([s for s, _ in seen] + [s + w for s, w in seen])
     span = _arc(ends)[1]
     return span >= SECTOR_SPAN and widest <= SECTOR_SHARE * span
+
+
+def _wide_arcs(arcs: tuple[Arc, ...]) -> int:
+    """How many of ``arcs`` span more than :data:`SECTOR_SHARE` of the circle."""
+    return sum(1 for a in arcs if a is not None and a[1] > SECTOR_SHARE * 2.0 * math.pi)
 
 
 def _wedge(centre: np.ndarray, start: float, width: float, r: float) -> np.ndarray:
@@ -537,6 +542,12 @@ class CoverageLearner:
             max_range=max(r, 1e-9),
         )
 
+    def last_arc(self, sensor_id: str) -> Arc:
+        """The arc of bearings of the detections of ``sensor_id``'s last scan learned (None:
+        none, or no position)."""
+        arcs = self._arcs.get(sensor_id, ())
+        return arcs[-1] if arcs else None
+
     def sweeping(self, sensor_id: str) -> bool:
         """Whether ``sensor_id``'s last scans are sectors of a revolution (:data:`SECTOR_SCANS`,
         :data:`SECTOR_SHARE`, :data:`SECTOR_SPAN`): each scan's detections within a narrow arc
@@ -551,12 +562,12 @@ class CoverageLearner:
         noise (:data:`SECTOR_MARGIN`), out to the range its scans reach (cut by that disc);
         :meth:`Coverage.none` for one without detections; ``None`` for any other scan (no
         position, or a sensor that does not stream sectors)."""
-        if position is None or self._wide.get(sensor_id, 0) > 1:
-            return None  # (a scan in the window with this one spans too wide an arc)
+        if position is None or self._wide.get(sensor_id, 0) > 2:
+            return None  # (two scans in the window with this one span too wide an arc)
         arcs = self._arcs.get(sensor_id, ())
-        if z.shape[0] == 0:
+        arc, near, sigma = (None, 0.0, 0.0) if z.shape[0] == 0 else _arc_of(z, R, position)
+        if arc is None:
             return Coverage.none(learned=True) if self.sweeping(sensor_id) else None
-        arc, near, sigma = _arc_of(z, R, position)
         if not _sweeping((*arcs[-(LEARN_SCANS - 1) :], arc)):
             return None
         boxes = [b for b in self._boxes.get(sensor_id, ()) if b is not None and b[5] is not None]
@@ -587,20 +598,20 @@ class CoverageLearner:
         self._boxes[sensor_id] = (*kept, self._box(z, R, position))
         arc = None
         if position is not None and z.shape[0]:
-            arc = _arc(_bearings(z, np.asarray(position, dtype=float)))
-        arcs = (*self._arcs.get(sensor_id, ())[-(LEARN_SCANS - 1) :], arc)
-        self._arcs[sensor_id] = arcs
-        if arc is not None and arc[1] > SECTOR_SHARE * 2.0 * math.pi:
-            self._wide[sensor_id] = LEARN_SCANS
-        else:
-            self._wide[sensor_id] = max(0, self._wide.get(sensor_id, 0) - 1)
-        self._sweeping[sensor_id] = self._wide[sensor_id] == 0 and _sweeping(arcs)
+            arc = _arc_of(z, R, position)[0]
+        self._set_arcs(sensor_id, (*self._arcs.get(sensor_id, ())[-(LEARN_SCANS - 1) :], arc))
         if position is not None:
             self._positions[sensor_id] = np.asarray(position, dtype=float).reshape(2).copy()
         while len(self._heard) > MAX_SENSORS:
             self._forget(next(iter(self._heard)))
         for sid in [sid for sid, last in self._heard.items() if t - last > FORGET_AFTER]:
             self._forget(sid)
+
+    def _set_arcs(self, sensor_id: str, arcs: tuple[Arc, ...]) -> None:
+        """Keep ``arcs`` (a sensor's last scans') and whether they are a sweep."""
+        self._arcs[sensor_id] = arcs
+        self._wide[sensor_id] = wide = _wide_arcs(arcs)
+        self._sweeping[sensor_id] = wide <= 1 and _sweeping(arcs)
 
     def _forget(self, sensor_id: str) -> None:
         """Drop all that is known of ``sensor_id``."""
@@ -613,15 +624,24 @@ class CoverageLearner:
 
     def snapshot(self) -> LearnerSnapshot:
         """What the learner knows now, immutable (its boxes are shared, not copied)."""
-        return tuple((sid, t, self._boxes.get(sid, ())) for sid, t in self._heard.items())
+        return tuple(
+            (sid, t, self._boxes.get(sid, ()), self._arcs.get(sid, ()))
+            for sid, t in self._heard.items()
+        )
 
     @staticmethod
     def export(snapshot: LearnerSnapshot) -> dict[str, Any]:
-        """``snapshot`` as plain JSON values: ``{"sensors": [{"id", "heard", "boxes"}]}``."""
+        """``snapshot`` as plain JSON values: ``{"sensors": [{"id", "heard", "boxes",
+        "arcs"}]}`` (``arcs``: ``[start, width]`` or null a scan, since 2026-11-27)."""
         return {
             "sensors": [
-                {"id": sid, "heard": t, "boxes": [None if b is None else list(b) for b in boxes]}
-                for sid, t, boxes in snapshot
+                {
+                    "id": sid,
+                    "heard": t,
+                    "boxes": [None if b is None else list(b) for b in boxes],
+                    "arcs": [None if a is None else list(a) for a in arcs],
+                }
+                for sid, t, boxes, arcs in snapshot
             ]
         }
 
@@ -665,8 +685,23 @@ class CoverageLearner:
                         None if reach is None else float(reach),
                     )
                 )
+            arcs = entry.get("arcs", [])  # none in a file written before 2026-11-27
+            if not isinstance(arcs, list) or len(arcs) > LEARN_SCANS:
+                raise ValueError(f"{where}.arcs: a list of at most {LEARN_SCANS}")
+            arcs_read: list[Arc] = []
+            for a in arcs:
+                ok = a is None or (
+                    isinstance(a, list)
+                    and len(a) == 2
+                    and all(map(_finite, a))
+                    and 0.0 <= a[1] <= 2.0 * math.pi
+                )
+                if not ok:
+                    raise ValueError(f"{where}.arcs: [start, width] (rad) or null each")
+                arcs_read.append(None if a is None else (float(a[0]), float(a[1])))
             if entry["id"] in out._heard:
                 raise ValueError(f"{where}.id: {entry['id']!r} twice")
             out._heard[entry["id"]] = float(t)
             out._boxes[entry["id"]] = tuple(read)
+            out._set_arcs(entry["id"], tuple(arcs_read))
         return out

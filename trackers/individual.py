@@ -539,7 +539,8 @@ class IndividualTracker:
             # out of view: their scores stand, and coasting ends them only a revisit past
             # the limit, so that a sensor looks at them again first (a radar reporting its
             # turn sector by sector looks at a track once a turn, not at each batch)
-            late = t - tracks.updated[idle] - _revisit_time(tracks, pd_coast, interval)[idle]
+            gap = _mean_gap(tracks)[idle]  # (a young track's too: P_D Δ̄, not T_s)
+            late = t - tracks.updated[idle] - np.maximum(pd_coast * gap, np.minimum(interval, gap))
             delete[idle] &= late * rate[idle] > tm.max_coast_time
         tested = delete.copy()  # deleted by the sequential test
         if idle.size:

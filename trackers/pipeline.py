@@ -26,7 +26,7 @@ import numpy as np
 from trackers.clutter import MAX_SENSORS as MAX_MAPPED_SENSORS
 from trackers.clutter import ClutterMap
 from trackers.config import TrackerConfig
-from trackers.coverage import CoverageLearner, LearnerSnapshot, bearing_arc, polygon_arc
+from trackers.coverage import CoverageLearner, LearnerSnapshot, polygon_arc
 from trackers.extended.tracker import ExtendedTracker
 from trackers.formation.tracker import FormationTracker
 from trackers.individual import IndividualTracker
@@ -204,6 +204,13 @@ class PipelineCheckpoint:
         )
 
 
+#: A stated disc (``max_range`` about the sensor) is the one the sensor's clutter map was
+#: started under while its range is within this fraction of that one's ...
+DISC_RANGE_CHANGE = 0.01
+#: ... and its centre within this fraction of that range of that one's.
+DISC_SHIFT = 0.25
+
+
 def _remember(table: dict[str, Any], sensor_id: str, value: Any) -> None:
     """``table[sensor_id] = value``, the most recently heard sensor last, keeping the
     :data:`MAX_MAPPED_SENSORS` most recently heard."""
@@ -348,21 +355,31 @@ class TrackingPipeline:
 
     def _map_disc(self, scan: Scan) -> bool:
         """Whether the disc the batch states (``max_range`` about its position; none) is the
-        one of its sensor's last mapped batch (or the first): if not, the sensor's clutter map
-        starts afresh and learns from the next batch that states the same (a platform that
-        moves at every batch never teaches it, as before)."""
+        one its sensor's clutter map was started under (or the first), within
+        :data:`DISC_RANGE_CHANGE` of its range and :data:`DISC_SHIFT` of its range from its
+        centre: if not, the map starts afresh under this disc, and learns from the next batch
+        that states about the same. A platform moving a little at every batch (a ship's
+        radar, 25 m a turn) keeps its map until it has gone a quarter of its range; before
+        2026-11-27 its map started afresh at every batch and never learned."""
         cov = scan.coverage
         disc = (
             None
             if cov is None or cov.centre is None or cov.max_range is None
             else (*cov.centre.tolist(), float(cov.max_range))
         )
-        known = self._discs.get(scan.sensor_id, disc)
-        _remember(self._discs, scan.sensor_id, disc)
-        if known != disc:
+        anchor = self._discs.get(scan.sensor_id, disc)
+        same = anchor == disc
+        if not same and anchor is not None and disc is not None:
+            x0, y0, r0 = anchor
+            x, y, r = disc
+            same = (
+                abs(r - r0) <= DISC_RANGE_CHANGE * r0
+                and math.hypot(x - x0, y - y0) <= DISC_SHIFT * r0
+            )
+        _remember(self._discs, scan.sensor_id, anchor if same else disc)
+        if not same:
             self._clutter.forget(scan.sensor_id)
-            return False
-        return True
+        return same
 
     def _committed(self, scan: Scan, point: PointProposal, rows: np.ndarray, mapped: bool) -> None:
         """After every tracker has taken ``scan``: its time is the last, the hand-overs are
@@ -386,6 +403,7 @@ class TrackingPipeline:
         # saying so) is gathered with the rest of its sweep, which teaches the map once.
         whole = self._same_view(scan)
         arc = None
+        swept = False  # (an arc of detections: the sweep passed from the last one's to it)
         position = scan.sensor_position
         if position is not None:
             cov = scan.coverage
@@ -393,14 +411,15 @@ class TrackingPipeline:
                 arc = None if whole else polygon_arc(cov.polygon, position)
             elif self._coverage.sweeping(scan.sensor_id):
                 whole = False
-                arc = bearing_arc(scan.z, position) if scan.size else None
+                arc = self._coverage.last_arc(scan.sensor_id)  # this batch's, just learned
+                swept = True
         sector = arc is not None
         if mapped and (sector or (whole and scan.size)) and self._map_disc(scan):
             mask = point.clutter
             clutter = rows if mask is None else rows[np.asarray(mask, dtype=bool)]
             if arc is not None:
                 self._clutter.learn_sector(
-                    scan.sensor_id, *arc, scan.z.take(clutter, axis=0), scan.R
+                    scan.sensor_id, *arc, scan.z.take(clutter, axis=0), scan.R, swept=swept
                 )
             else:
                 self._clutter.learn(scan.sensor_id, scan.z.take(clutter, axis=0), scan.R)

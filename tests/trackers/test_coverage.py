@@ -510,7 +510,7 @@ def test_the_learner_cuts_a_radars_box_to_the_range_it_sees() -> None:
     assert CoverageLearner.restored(values).snapshot() == learner.snapshot()
     old = {"sensors": [{**s, "boxes": [b[:5] for b in s["boxes"]]} for s in values["sensors"]]}
     assert all(
-        b[5] is None for _, _, boxes in CoverageLearner.restored(old).snapshot() for b in boxes
+        b[5] is None for _, _, boxes, _ in CoverageLearner.restored(old).snapshot() for b in boxes
     )
     bad = {"sensors": [{"id": "a", "heard": 1.0, "boxes": [[0, 0, 1, 1, 1, -5.0]]}]}
     with pytest.raises(ValueError, match="range or null"):
@@ -665,6 +665,14 @@ def test_a_radar_streaming_sectors_is_seen_to_sweep_and_each_batch_looks_at_its_
     assert not cov.contains(np.array([[3e4 * np.cos(mid), 3e4 * np.sin(mid)]]))[0]  # beyond
     empty = learner.coverage("r", 100.0, np.zeros((0, 2)), np.zeros((0, 2, 2)), pos)
     assert empty is not None and empty.nowhere
+    # saved with the tracks and restored: still a sweep (before, 8 batches to relearn, each
+    # a look everywhere, and a restored sector radar lost its tracks)
+    again = CoverageLearner.restored(CoverageLearner.export(learner.snapshot()))
+    assert again.sweeping("r") and again.snapshot() == learner.snapshot()
+    # one odd batch (a detection at the radar, one half a turn away) does not stop the sweep
+    odd = np.array([[0.0, 5.0], [-8e3, -1e3]])
+    learner.learn("r", 101.0, odd, np.tile(np.eye(2) * 900.0, (2, 1, 1)), pos)
+    assert learner.sweeping("r")
 
 
 @pytest.mark.parametrize("pd", [0.9, 0.4])
@@ -745,3 +753,50 @@ def test_a_sector_radars_track_missed_two_turns_keeps_its_id():
         if t > 30.0:
             ids.append(near[0] if near else None)
     assert None not in ids and len(set(ids)) == 1
+
+
+def test_a_moving_radar_stating_its_range_keeps_its_clutter_map():
+    """A ship's radar stating `max_range` (12 km) while it moves 25 m a turn: its map started
+    afresh at every batch and never learned (a newcomer's patrol ship: 6.5 false tracks a
+    scan in its sea and island clutter, 2.5 without `max_range`; 2.5 with it now). The map
+    is kept until the radar has gone a quarter of its range, or states another range."""
+    rng = np.random.default_rng(7)
+
+    def batch(k: int, at: np.ndarray, rmax: float = 12e3) -> Scan:
+        z = _disc_clutter(rng, 20, at, rmax)
+        cov = Coverage(centre=at, max_range=rmax)
+        return Scan("ship", 2.5 * k, z, _R2(len(z), 15.0), sensor_position=at, coverage=cov)
+
+    pipe = TrackingPipeline(TrackerConfig())
+    for k in range(20):
+        pipe.process(batch(k, np.array([25.0 * k, 0.0])))
+    grid = pipe._clutter._grids["ship"]
+    assert grid.scans == 20
+    pipe.process(batch(20, np.array([4e3, 0.0])))  # 3.5 km on from where the map began
+    assert "ship" not in pipe._clutter._grids
+    pipe.process(batch(21, np.array([4e3 + 25.0, 0.0])))
+    assert pipe._clutter._grids["ship"].scans == 1
+    pipe.process(batch(22, np.array([4e3 + 50.0, 0.0]), rmax=6e3))  # another range
+    assert "ship" not in pipe._clutter._grids
+
+
+def test_a_radar_streaming_sectors_without_saying_so_teaches_its_map_once_a_turn():
+    """The sweep of a radar whose sectors are inferred passes over the bearings between one
+    batch's detections and the next's: the map learns once a turn, 40 turns 40 looks (before,
+    with each batch's own arc alone, the sweep seldom came round: 8 looks in 100 turns), and
+    a camera panning to and fro over its view teaches nothing."""
+    rng = np.random.default_rng(11)
+    p = TrackingPipeline()
+    for t, z in _sectors(rng, 42, clutter=1.0):
+        scan = Scan("r", t, z, np.tile(np.eye(2) * 900.0, (len(z), 1, 1)))
+        p.process(replace(scan, sensor_position=np.zeros(2)))
+    assert 38 <= p._clutter._grids["r"].scans <= 48
+    cam = TrackingPipeline()
+    for k in range(200):
+        a = np.radians(30.0 + 20.0 * np.sin(k / 20.0))  # a 60 deg view panning to and fro
+        arc = np.linspace(a - np.radians(30), a + np.radians(30), 8)
+        view = np.vstack([[0.0, 0.0], 200.0 * np.column_stack([np.cos(arc), np.sin(arc)])])
+        z = np.array([[100.0 * np.cos(a), 100.0 * np.sin(a)]])
+        scan = Scan("c", 0.1 * k, z, np.tile(np.eye(2) * 0.09, (1, 1, 1)))
+        cam.process(replace(scan, sensor_position=np.zeros(2), coverage=Coverage(polygon=view)))
+    assert "c" not in cam._clutter._grids
