@@ -362,7 +362,7 @@ Box = tuple[float, float, float, float, float, float | None] | None
 #: The arc of bearings ``(start, width)`` (rad) a scan's detections span about its sensor.
 Arc = tuple[float, float] | None
 #: What a :class:`CoverageLearner` knows, least recently heard sensor first: each sensor's id,
-#: when it was last heard and the boxes of its last :data:`LEARN_SCANS` scans.
+#: when it was last heard and the boxes and arcs of its last :data:`LEARN_SCANS` scans.
 LearnerSnapshot = tuple[tuple[str, float, tuple[Box, ...], tuple[Arc, ...]], ...]
 
 
@@ -463,9 +463,9 @@ class CoverageLearner:
         self._heard: OrderedDict[str, float] = OrderedDict()
         #: each sensor's position as its last scan that gave one gave it (not saved)
         self._positions: dict[str, np.ndarray] = {}
-        #: the arcs of each sensor's last LEARN_SCANS scans (not saved: relearned in as many),
-        #: for how many more scans one of them spans too much for a sector (wider than
-        #: SECTOR_SHARE of the circle), and whether they are sectors of a revolution
+        #: the arcs of each sensor's last LEARN_SCANS scans (saved with the boxes), how many
+        #: of them span too much for a sector (more than SECTOR_SHARE of the circle), and
+        #: whether they are sectors of a revolution
         self._arcs: dict[str, tuple[Arc, ...]] = {}
         self._wide: dict[str, int] = {}
         self._sweeping: dict[str, bool] = {}
