@@ -539,8 +539,9 @@ class IndividualTracker:
             # out of view: their scores stand, and coasting ends them only a revisit past
             # the limit, so that a sensor looks at them again first (a radar reporting its
             # turn sector by sector looks at a track once a turn, not at each batch)
-            gap = _mean_gap(tracks)[idle]  # (a young track's too: P_D Δ̄, not T_s)
-            late = t - tracks.updated[idle] - np.maximum(pd_coast * gap, np.minimum(interval, gap))
+            # (a young track's revisit too: P_D Δ̄, not T_s)
+            revisit = _revisit_time(tracks, pd_coast, interval, min_instants=0)[idle]
+            late = t - tracks.updated[idle] - revisit
             delete[idle] &= late * rate[idle] > tm.max_coast_time
         tested = delete.copy()  # deleted by the sequential test
         if idle.size:
@@ -1716,12 +1717,17 @@ def _coast_rate(
     return np.minimum(1.0, max_coast / np.maximum(reach, max_coast))
 
 
-def _revisit_time(tracks: TrackArrays, pd: float, sensor_interval: float = 0.0) -> np.ndarray:
+def _revisit_time(
+    tracks: TrackArrays,
+    pd: float,
+    sensor_interval: float = 0.0,
+    min_instants: int = COAST_MIN_INSTANTS,
+) -> np.ndarray:
     """``T̂ = max(P_D Δ̄, min(T_s, Δ̄))``, each track's sensor revisit as :func:`_coast_rate`
-    reads it (``P_D Δ̄`` only for tracks with detections of :data:`COAST_MIN_INSTANTS`
-    instants or more)."""
+    reads it (``P_D Δ̄`` only for tracks with detections of ``min_instants`` instants or
+    more)."""
     gap = _mean_gap(tracks)
-    own = np.where(tracks.instants >= COAST_MIN_INSTANTS, pd * gap, 0.0)
+    own = np.where(tracks.instants >= min_instants, pd * gap, 0.0)
     return np.maximum(own, np.minimum(sensor_interval, gap))
 
 

@@ -391,16 +391,16 @@ class TrackingPipeline:
         self._hand_in.clear()
         self._hand_over.clear()
         self._coverage.learn(scan.sensor_id, scan.time, scan.z, scan.R, scan.sensor_position)
-        # A batch with a coverage polygon of its own (a sector of a revolution) or no
-        # detection (a heartbeat) would count as a look at every cell: the map learns from
-        # the others, and from a polygon that the sensor's previous batch stated too (a
-        # camera's fixed field of view: cells outside it never see a detection). A range
-        # alone (``max_range``) is a whole revolution: its cells beyond the range never see a
-        # detection, and are never looked at either while the disc stays where it is; when
-        # it moves or changes, the sensor's map starts afresh.
-        # A sector of a revolution (a polygon other than the previous batch's, about the
+        # A batch teaches the map as a look at every cell when it states no polygon, or the
+        # one its sensor's previous batch stated (a camera's fixed field of view: cells
+        # outside it never see a detection), and holds a detection (not a heartbeat). A
+        # sector of a revolution (a polygon other than the previous batch's, about the
         # sensor's position, or the detections of a sensor that streams sectors without
-        # saying so) is gathered with the rest of its sweep, which teaches the map once.
+        # saying so) is gathered with the rest of its sweep, which teaches the map once;
+        # other polygons (a camera panning) teach nothing. A range alone (``max_range``) is
+        # a whole revolution: its cells beyond the range never see a detection, and are never
+        # looked at either while the disc stays about where it is; when it moves far or
+        # changes, the sensor's map starts afresh (:meth:`_map_disc`).
         whole = self._same_view(scan)
         arc = None
         swept = False  # (an arc of detections: the sweep passed from the last one's to it)
