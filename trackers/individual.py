@@ -111,6 +111,17 @@ MIN_CONFIRM_INSTANTS = 3
 #: ``max_coast_time`` 10 s deleted it at the second miss.
 COAST_MIN_INSTANTS = 5
 
+#: A scan looks at a track when at least this share of its predicted position's distribution
+#: lies in the scan's coverage (:func:`_visible`; ``TrackArrays.looked``).
+LOOK_SHARE = 0.5
+
+#: A confirmed track out of view that no scan has looked at for this many of its revisits
+#: has left every sensor's view (:func:`_left_view`): it is deleted, and no young track
+#: continues it (:func:`_relinked`). A track in view is deleted after its third miss in a row
+#: or so; out of view, it waited for the coasting limit (a car 270 m past a road radar's
+#: coverage at 10 Hz, whose id the next car to enter there took).
+LOOK_CYCLES = 4.0
+
 #: The highest serial number a state file may give the next detection (``TrackArrays.took``:
 #: ten million detections a second for ten thousand years stay below it).
 MAX_SERIAL = 2**62
@@ -130,7 +141,8 @@ class TrackArrays(RowArrays):
     (:func:`_siblings_sharing`).
     ``origin`` numbers the detection a track started from: tracks of one origin are rival
     hypotheses of one target's start, of which only the likeliest is kept once each has
-    been tested against a scan.
+    been tested against a scan. ``looked`` is the last time a scan looked at the track (had
+    its predicted position in view at least :data:`LOOK_SHARE`, or updated it).
     """
 
     ids: np.ndarray
@@ -149,6 +161,7 @@ class TrackArrays(RowArrays):
     detection_ids: np.ndarray
     origin: np.ndarray
     took: np.ndarray
+    looked: np.ndarray
 
     @staticmethod
     def empty(n_modes: int) -> TrackArrays:
@@ -170,6 +183,7 @@ class TrackArrays(RowArrays):
             detection_ids=np.zeros(0, dtype=object),
             took=np.zeros(0, dtype=np.int64),
             origin=np.zeros(0, dtype=np.int64),
+            looked=np.zeros(0),
         )
 
     @property
@@ -520,6 +534,16 @@ class IndividualTracker:
         # of this sensor's view is held to the most lenient of the sensors' limits.
         revisits: float | np.ndarray = reach
         idle = np.zeros(0, dtype=np.intp) if seen is None else np.flatnonzero(~seen)
+        revisit = np.zeros(0)
+        lost = None  # the tracks that have left every sensor's view
+        if idle.size:
+            # (a young track's revisit too: P_D Δ̄, not T_s)
+            revisit = _revisit_time(tracks, pd_coast, interval, min_instants=0)[idle]
+            gone = _left_view(tracks, idle, revisit, rates.longest_interval(t), t)
+            if gone.any():
+                lost = np.zeros(n_old, dtype=bool)
+                lost[idle[gone]] = True
+                idle, revisit = idle[~gone], revisit[~gone]
         if n_old and (longer or idle.size):
             revisits = np.full(len(tracks), reach)
             if longer:
@@ -539,13 +563,14 @@ class IndividualTracker:
             # out of view: their scores stand, and coasting ends them only a revisit past
             # the limit, so that a sensor looks at them again first (a radar reporting its
             # turn sector by sector looks at a track once a turn, not at each batch)
-            # (a young track's revisit too: P_D Δ̄, not T_s)
-            revisit = _revisit_time(tracks, pd_coast, interval, min_instants=0)[idle]
             late = t - tracks.updated[idle] - revisit
             delete[idle] &= late * rate[idle] > tm.max_coast_time
         tested = delete.copy()  # deleted by the sequential test
         if idle.size:
             tested[idle] = False  # coasted out of view: no verdict on its detections
+        if lost is not None:
+            delete[:n_old] |= lost  # left every sensor's view: a target's, gone
+            tested[:n_old] &= ~lost
         delete[:n_old] |= rivals  # tentative, so not among the deleted ids
         # Two detections say that a target is there, not how it moves: a pair whose slow and
         # fast readings both fit (200 m in 1 s under 40 m noise) may hold the wrong one, and
@@ -564,7 +589,7 @@ class IndividualTracker:
         if young.any():
             before = delete.copy()
             tracks, young, delete = _relinked(
-                tracks, young, delete, t, config, n_old, _typical(lam_fa)
+                tracks, young, delete, t, config, n_old, _typical(lam_fa), lost
             )
             tracked |= delete & ~before  # merged into the confirmed track they continue
             newly &= ~delete
@@ -746,6 +771,13 @@ class IndividualTracker:
             updated=updated,
             detection_ids=det_ids,
             took=took,
+            looked=(
+                np.full(len(tracks), scan.time)
+                if visible is None
+                else np.where(
+                    (visible >= LOOK_SHARE) | (updated == scan.time), scan.time, tracks.looked
+                )
+            ),
         )
         return new, claims, range_rates, established, (ti, dj), held
 
@@ -985,6 +1017,7 @@ _TRACK_NUMBERS = (
     "updated",
     "origin",
     "took",
+    "looked",
 )
 _CANDIDATE_NUMBERS = ("z", "R", "time", "score", "origin")
 
@@ -1030,6 +1063,7 @@ def _import(section: StateSection, config: TrackerConfig, id_prefix: str = "") -
     took = r.integers("tracks.took", (n,), ge=-1) if r.has("tracks.took") else None
     if took is None or "next_serial" not in r.values:  # a file from before siblings
         took = np.full(n, -1, dtype=np.int64)
+    updated = r.floats("tracks.updated", (n,))
     tracks = TrackArrays(
         ids=_objects(ids),
         x=r.floats("tracks.x", (n, M, D)),
@@ -1047,10 +1081,12 @@ def _import(section: StateSection, config: TrackerConfig, id_prefix: str = "") -
             else hits.copy()  # a file from before instants were counted
         ),
         created=r.floats("tracks.created", (n,)),
-        updated=r.floats("tracks.updated", (n,)),
+        updated=updated,
         detection_ids=_objects(r.string_groups("tracks.detection_ids", n)),
         origin=r.integers("tracks.origin", (n,), ge=0),
         took=took,
+        # a file from before: looked at when last updated
+        looked=r.floats("tracks.looked", (n,)) if r.has("tracks.looked") else updated.copy(),
     )
     candidates = Candidates(
         z=r.floats("candidates.z", (k, 2)),
@@ -1228,6 +1264,7 @@ def _new_tracks(
         detection_ids=det_ids,
         origin=np.asarray(origin, dtype=np.int64),
         took=counters.serial + np.asarray(detections, dtype=np.int64),
+        looked=np.full(n, float(scan.time)),
     )
 
 
@@ -1307,6 +1344,7 @@ def _adopted(
         detection_ids=_objects([()] * n),
         origin=counters.origins(n),
         took=np.full(n, -1, dtype=np.int64),
+        looked=np.array([st.time for st in states], dtype=float),  # the peer's view of it
     )
 
 
@@ -1717,6 +1755,25 @@ def _coast_rate(
     return np.minimum(1.0, max_coast / np.maximum(reach, max_coast))
 
 
+def _left_view(
+    tracks: TrackArrays, idle: np.ndarray, revisit: np.ndarray, longest: float, t: float
+) -> np.ndarray:
+    """Of the tracks ``idle`` (indices of tracks out of this scan's view; ``revisit`` their
+    :func:`_revisit_time`), those that have left every sensor's view: confirmed with
+    detections of :data:`COAST_MIN_INSTANTS` instants or more (a revisit read from them), and
+    looked at by no scan for :data:`LOOK_CYCLES` times the longer of their revisit and the
+    ``longest`` mean interval between the scans of any sensor heard lately. A car past the end
+    of a road radar's stated coverage is gone; a track in another sector of a rotating radar
+    that reports its turn by sectors, or in the view of a slower radar only, is looked at
+    once a revisit."""
+    cycle = LOOK_CYCLES * np.maximum(revisit, longest)
+    return (
+        tracks.confirmed[idle]
+        & (tracks.instants[idle] >= COAST_MIN_INSTANTS)
+        & (t - tracks.looked[idle] > cycle)
+    )
+
+
 def _revisit_time(
     tracks: TrackArrays,
     pd: float,
@@ -1815,6 +1872,7 @@ def _relinked(
     config: TrackerConfig,
     n_old: int,
     clutter_density: float,
+    lost: np.ndarray | None = None,
 ) -> tuple[TrackArrays, np.ndarray, np.ndarray]:
     """Young tracks (``young``: tentative ones with detections of at least 3 instants that
     are confirmed at this scan or score 0 or more) that continue a confirmed track which lost
@@ -1848,6 +1906,8 @@ def _relinked(
     coasting track's wide prediction now and then."""
     new = np.flatnonzero(young[:n_old])
     old = np.flatnonzero((tracks.confirmed & (tracks.updated < t))[:n_old])
+    if lost is not None:
+        old = old[~lost[old]]
     if new.size and old.size:  # only those lost before the youngest started
         old = old[tracks.updated[old] < tracks.created[new].max()]
     if new.size == 0 or old.size == 0:
@@ -1922,7 +1982,7 @@ def _relinked(
     rn = np.array([p[0] for p in pairs])
     ro = np.array([p[1] for p in pairs])
     fields = {k: getattr(tracks, k).copy() for k in tracks.__dataclass_fields__}
-    for k in ("x", "P", "mu", "x_comb", "P_comb", "updated", "detection_ids", "took"):
+    for k in ("x", "P", "mu", "x_comb", "P_comb", "updated", "detection_ids", "took", "looked"):
         fields[k][ro] = fields[k][rn]
     fields["hits"][ro] += fields["hits"][rn]
     fields["instants"][ro] += fields["instants"][rn]

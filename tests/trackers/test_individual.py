@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from trackers.config import TrackerConfig
+from trackers.coverage import Coverage
 from trackers.individual import IndividualTracker
 from trackers.types import Scan
 
@@ -980,3 +981,80 @@ def test_the_along_track_noise_is_the_noise_of_the_time_since_the_last_detection
     Q = along_track_noise(pred.x_pred[ti[0], j], pred.config.motion.q_ct_along, 2.0)
     np.testing.assert_allclose(P[0, j] - pred.P_pred[ti[0], j], Q, rtol=1e-12, atol=1e-12)
     np.testing.assert_array_equal(P[0, 1 - j], pred.P_pred[ti[0], 1 - j])
+
+
+#: A road radar's stated coverage: 30-250 m along the road, ±10 m across it.
+ROAD = np.array([[30.0, -10.0], [250.0, -10.0], [250.0, 10.0], [30.0, 10.0]])
+
+
+def _road(seed, gap):
+    """Car A drives out past the far end of ROAD at 27.5 m/s (10 Hz, 0.5 m noise, P_D
+    0.95); ``gap`` seconds later car B comes in there on the other carriageway at 21 m/s.
+    Returns the confirmed ids within 3 m of each car and the time A's track was reported
+    deleted, after A left (None: not in the run)."""
+    tr = IndividualTracker(TrackerConfig())
+    rng = np.random.default_rng(seed)
+    cover = Coverage(polygon=ROAD)
+    t_out = (250.0 - 60.0) / 27.5
+    ids = {"A": set(), "B": set()}
+    gone = None
+    for k in range(int((t_out + gap + 6.0) / 0.1)):
+        s = 0.1 * k
+        cars = {"A": np.array([60.0 + 27.5 * s, -1.75])}
+        if s >= t_out + gap:
+            cars["B"] = np.array([250.0 - 21.0 * (s - t_out - gap), 1.75])
+        cars = {n: p for n, p in cars.items() if 30.0 <= p[0] <= 250.0}
+        z = [p + rng.normal(0.0, 0.5, 2) for p in cars.values() if rng.random() < 0.95]
+        scan = replace(scan_at(1000.0 + s, z, pd=0.95, sigma=0.5), coverage=cover)
+        res = tr.step(scan)
+        if "A" in ids and ids["A"] & set(res.deleted) and gone is None and s > t_out:
+            gone = s - t_out
+        for n, p in cars.items():
+            ids[n] |= {c.id for c in res.confirmed() if np.hypot(*np.subtract(c.position, p)) < 3}
+    return ids, gone
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_a_track_that_leaves_the_stated_coverage_is_deleted_soon(seed):
+    """Out of a scan's view a track is not missed: a rotating radar that reports its turn
+    sector by sector looks at it once a turn. But a car past the end of a road radar's
+    coverage is looked at by no scan: its track coasted on for the coasting limit (10 s,
+    270 m past the end) and the next car to come in there took its id. Deleted once no scan
+    has looked at it for LOOK_CYCLES revisits (0.4 s at 10 Hz)."""
+    ids, gone = _road(seed, gap=0.5)
+    assert len(ids["A"]) == 1 and gone is not None and gone < 1.0
+
+
+@pytest.mark.parametrize("seed", [3, 4, 9])
+def test_a_car_that_comes_in_where_another_left_gets_its_own_id(seed):
+    """Car B comes in 9.5 s after car A left there, the other way: A's track, coasting out
+    of view, was continued by B's young track (a constant acceleration of 5 m/s² turns A
+    round in 10 s) and B took A's id (these seeds did before)."""
+    ids, _ = _road(seed, gap=9.5)
+    assert len(ids["A"]) == 1 and len(ids["B"]) == 1 and not ids["A"] & ids["B"]
+
+
+def test_a_track_seen_by_a_slower_radar_only_is_not_taken_for_gone():
+    """A target flies out of a fast radar's stated coverage (T = 0.5 s) into the part of a
+    slower radar's (T = 4 s) that the fast one does not see: the slow radar looks at it once
+    every 4 s, while the track's own revisit, read from both radars' detections, is under a
+    second. Its track lives on (the longest interval of the radars heard counts)."""
+    tr = IndividualTracker(TrackerConfig())
+    rng = np.random.default_rng(5)
+    fast = Coverage(polygon=np.array([[0.0, -5e3], [10e3, -5e3], [10e3, 5e3], [0.0, 5e3]]))
+    slow = Coverage(centre=np.array([10e3, 0.0]), max_range=30e3)
+    ids = set()
+    for k in range(240):  # 120 s: the target leaves the fast radar's view at t = 40 s
+        t = 0.5 * k
+        p = np.array([2e3 + 200.0 * t, 1e3])
+        if k % 8 == 0:
+            res = tr.step(
+                replace(scan_at(t, p + rng.normal(0, 30.0, 2), "slow", sigma=30.0), coverage=slow)
+            )
+        else:
+            z = [p + rng.normal(0, 30.0, 2)] if fast.polygon[1, 0] >= p[0] else []
+            res = tr.step(replace(scan_at(t, z, "fast", sigma=30.0), coverage=fast))
+        if t >= 10.0:
+            ids |= {c.id for c in res.confirmed() if np.hypot(*np.subtract(c.position, p)) < 300}
+            assert any(np.hypot(*np.subtract(c.position, p)) < 300 for c in res.confirmed())
+    assert len(ids) == 1
