@@ -53,10 +53,6 @@ MAX_INTERVAL_STEP = 3.0
 #: At most this many sensors are remembered (the least recently heard goes first).
 MAX_SENSORS = 256
 
-#: A sensor counts as heard lately (:meth:`DetectionRates.longest_interval`) until it has
-#: been silent for this many of its mean intervals between scans.
-HEARD_INTERVALS = 4.0
-
 
 def coast_revisits(pd: float, beta: float) -> float:
     """How many revisits of its sensor a confirmed track may coast through (module
@@ -112,18 +108,6 @@ class DetectionRates:
         if rate is None or math.isnan(rate.interval):
             return 0.0
         return rate.interval
-
-    def longest_interval(self, now: float) -> float:
-        """The longest :meth:`interval` of the sensors heard in the last
-        :data:`HEARD_INTERVALS` of their own intervals before ``now``; 0 when none."""
-        return max(
-            (
-                r.interval
-                for r in self.sensors.values()
-                if not math.isnan(r.interval) and now - r.time <= HEARD_INTERVALS * r.interval
-            ),
-            default=0.0,
-        )
 
     def lowest(self, prior: float) -> float:
         """The lowest learned ``P_D`` of all sensors, and ``prior``'s: the most lenient

@@ -26,8 +26,9 @@ One step, for a scan at time t with detections z_j (covariances R_j):
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
+from types import MappingProxyType
 
 import numpy as np
 
@@ -46,7 +47,7 @@ from trackers.association.manoeuvre import (
 )
 from trackers.association.spatial import pairs_within
 from trackers.config import InitiationConfig, MeasurementConfig, TrackerConfig
-from trackers.coverage import disc_fraction, visible_fraction
+from trackers.coverage import Coverage, disc_fraction, visible_fraction
 from trackers.detection_rate import (
     LOOK_MIN_HITS,
     MIN_MISSES,
@@ -115,12 +116,28 @@ COAST_MIN_INSTANTS = 5
 #: lies in the scan's coverage (:func:`_visible`; ``TrackArrays.looked``).
 LOOK_SHARE = 0.5
 
-#: A confirmed track out of view that no scan has looked at for this many of its revisits
-#: has left every sensor's view (:func:`_left_view`): it is deleted, and no young track
-#: continues it (:func:`_relinked`). A track in view is deleted after its third miss in a row
-#: or so; out of view, it waited for the coasting limit (a car 270 m past a road radar's
-#: coverage at 10 Hz, whose id the next car to enter there took).
+#: A confirmed track out of view that no scan has looked at for this many of its revisits,
+#: and that lies in no sensor's field of regard (:class:`_Regard`), has left every sensor's
+#: view (:func:`_left_view`): it is deleted, and no young track continues it
+#: (:func:`_relinked`). A track in view is deleted after its third miss in a row or so; out
+#: of view, it waited for the coasting limit (a car 270 m past a road radar's coverage at
+#: 10 Hz, whose id the next car to enter there took).
 LOOK_CYCLES = 4.0
+
+#: A sensor's field of regard is the union of the areas its last this many scans looked at
+#: (one entry while they look at the same area: a camera's footprint, a road radar's stated
+#: coverage; two turns of a radar that reports 16 sectors a turn).
+REGARD_SCANS = 32
+
+#: A track lies in a sensor's field of regard when at least this share of its predicted
+#: position's distribution lies in one of the areas of it.
+REGARD_SHARE = 0.1
+
+#: A sensor's field of regard is forgotten once it has been silent for the longer of
+#: ``track_management.max_coast_time`` and this many of its mean intervals between scans;
+#: no track is taken for gone until the tracker has run that long since it started, was reset
+#: or restored (fields of regard are not saved).
+REGARD_INTERVALS = 4.0
 
 #: The highest serial number a state file may give the next detection (``TrackArrays.took``:
 #: ten million detections a second for ten thousand years stay below it).
@@ -252,6 +269,72 @@ class _State:
     next_serial: int = 0
     #: each sensor's detection probability as its tracks show it (not saved: relearned)
     rates: DetectionRates = field(default_factory=DetectionRates)
+    #: each sensor's field of regard (not saved: relearned), and the time of the first scan
+    #: since the tracker started, was reset or restored
+    regard: Mapping[str, _Regard] = field(default_factory=lambda: MappingProxyType({}))
+    since: float | None = None
+
+
+@dataclass(frozen=True)
+class _Regard:
+    """Where one sensor has been looking: the areas of its last :data:`REGARD_SCANS` scans,
+    a run of scans of one area as one entry (``None``: everywhere), and when it was last
+    heard."""
+
+    time: float
+    areas: tuple[Coverage | None, ...]
+
+
+def _same_area(a: Coverage | None, b: Coverage | None) -> bool:
+    """Whether two scans' coverages are one area (``None``: everywhere)."""
+    if a is None or b is None:
+        return a is b
+    if a is b:
+        return True
+    if a.nowhere or b.nowhere:
+        return a.nowhere == b.nowhere
+    return (
+        a.max_range == b.max_range
+        and _same_points(a.centre, b.centre)
+        and _same_points(a.polygon, b.polygon)
+    )
+
+
+def _same_points(a: np.ndarray | None, b: np.ndarray | None) -> bool:
+    if a is None or b is None:
+        return a is b
+    return a.shape == b.shape and bool(np.array_equal(a, b))
+
+
+def _regarded(
+    regard: Mapping[str, _Regard],
+    scan: Scan,
+    rates: DetectionRates,
+    max_coast: float,
+) -> Mapping[str, _Regard]:
+    """The fields of regard with ``scan``'s area added to its sensor's; those of sensors
+    silent for longer than :data:`REGARD_INTERVALS` of their intervals (at least
+    ``max_coast``) dropped, and no more than :data:`MAX_REGARDS` kept (the least recently
+    heard goes first)."""
+    t = float(scan.time)
+    out: dict[str, _Regard] = {}
+    for sensor, r in regard.items():
+        if sensor != scan.sensor_id and t - r.time <= max(
+            max_coast, REGARD_INTERVALS * rates.interval(sensor)
+        ):
+            out[sensor] = r
+    old = regard.get(scan.sensor_id)
+    areas = () if old is None else old.areas
+    if not areas or not _same_area(areas[-1], scan.coverage):
+        areas = (*areas, scan.coverage)[-REGARD_SCANS:]
+    out[scan.sensor_id] = _Regard(t, areas)  # the most recently heard last
+    while len(out) > MAX_REGARDS:
+        del out[next(iter(out))]
+    return MappingProxyType(out)
+
+
+#: At most this many sensors' fields of regard are kept.
+MAX_REGARDS = 256
 
 
 class _Counters:
@@ -444,6 +527,8 @@ class IndividualTracker:
         longer = reach > MIN_MISSES - 0.5  # a sensor that misses more than P_D 0.9 does
         serial = self._state.next_serial  # this batch's detection j is number serial + j
         interval = rates.interval(scan.sensor_id)  # the sensor's mean interval between batches
+        regard = _regarded(self._state.regard, scan, rates, tm.max_coast_time)
+        since = t if self._state.since is None else self._state.since
         counters = _Counters(self._state.next_id, self._state.next_origin, self.id_prefix, serial)
 
         released: tuple[PointTrackState, ...] = ()
@@ -539,7 +624,7 @@ class IndividualTracker:
         if idle.size:
             # (a young track's revisit too: P_D Δ̄, not T_s)
             revisit = _revisit_time(tracks, pd_coast, interval, min_instants=0)[idle]
-            gone = _left_view(tracks, idle, revisit, rates.longest_interval(t), t)
+            gone = _left_view(pred, idle, revisit, t, regard, since, tm.max_coast_time)
             if gone.any():
                 lost = np.zeros(n_old, dtype=bool)
                 lost[idle[gone]] = True
@@ -615,6 +700,8 @@ class IndividualTracker:
             next_origin=counters.next_origin,
             next_serial=serial + scan.size,
             rates=rates.learned(scan.sensor_id, t, looks, detected),
+            regard=regard,
+            since=since,
         )
         names = tuple(m.name for m in models)
         result = StepResult(
@@ -1756,22 +1843,42 @@ def _coast_rate(
 
 
 def _left_view(
-    tracks: TrackArrays, idle: np.ndarray, revisit: np.ndarray, longest: float, t: float
+    pred: _Prediction,
+    idle: np.ndarray,
+    revisit: np.ndarray,
+    t: float,
+    regard: Mapping[str, _Regard],
+    since: float,
+    max_coast: float,
 ) -> np.ndarray:
-    """Of the tracks ``idle`` (indices of tracks out of this scan's view; ``revisit`` their
-    :func:`_revisit_time`), those that have left every sensor's view: confirmed with
-    detections of :data:`COAST_MIN_INSTANTS` instants or more (a revisit read from them), and
-    looked at by no scan for :data:`LOOK_CYCLES` times the longer of their revisit and the
-    ``longest`` mean interval between the scans of any sensor heard lately. A car past the end
-    of a road radar's stated coverage is gone; a track in another sector of a rotating radar
-    that reports its turn by sectors, or in the view of a slower radar only, is looked at
-    once a revisit."""
-    cycle = LOOK_CYCLES * np.maximum(revisit, longest)
-    return (
+    """Of the tracks ``idle`` (indices of the predicted tracks out of this scan's view;
+    ``revisit`` their :func:`_revisit_time`), a mask of those that have left every sensor's
+    view: confirmed with detections of :data:`COAST_MIN_INSTANTS` instants or more (a revisit
+    read from them), looked at by no scan for :data:`LOOK_CYCLES` of their revisits, and in
+    no sensor's field of regard (``regard``: less than :data:`REGARD_SHARE` of the predicted
+    position in each area its last scans looked at). None while the fields of regard are
+    younger than ``max_coast`` (the tracker started, was reset or restored at ``since``). A
+    car past the end of a road radar's stated coverage is gone; a track in another sector of
+    a rotating radar that reports its turn by sectors, in the view of a slower radar only or
+    of a sensor that paused is not."""
+    tracks = pred.tracks
+    out = (
         tracks.confirmed[idle]
         & (tracks.instants[idle] >= COAST_MIN_INSTANTS)
-        & (t - tracks.looked[idle] > cycle)
+        & (t - tracks.looked[idle] > LOOK_CYCLES * revisit)
     )
+    if not out.any() or t - since < max_coast:
+        return np.zeros(idle.size, dtype=bool)
+    at = idle[out]
+    xy, P = pred.xc[at, :2], pred.Pc[at, :2, :2]
+    seen = np.zeros(at.size, dtype=bool)
+    for r in regard.values():
+        for area in r.areas:
+            if area is None:
+                return np.zeros(idle.size, dtype=bool)  # a sensor that looks everywhere
+            seen |= visible_fraction(area, xy, P) >= REGARD_SHARE
+    out[out] = ~seen
+    return out
 
 
 def _revisit_time(

@@ -988,19 +988,19 @@ ROAD = np.array([[30.0, -10.0], [250.0, -10.0], [250.0, 10.0], [30.0, 10.0]])
 
 
 def _road(seed, gap):
-    """Car A drives out past the far end of ROAD at 27.5 m/s (10 Hz, 0.5 m noise, P_D
-    0.95); ``gap`` seconds later car B comes in there on the other carriageway at 21 m/s.
-    Returns the confirmed ids within 3 m of each car and the time A's track was reported
-    deleted, after A left (None: not in the run)."""
+    """Car A drives along ROAD and out past its far end at 27.5 m/s (10 Hz, 0.5 m noise,
+    P_D 0.95); ``gap`` seconds later car B comes in there on the other carriageway at
+    21 m/s. Returns the confirmed ids within 3 m of each car and the time A's track was
+    reported deleted, after A left (None: not in the run)."""
     tr = IndividualTracker(TrackerConfig())
     rng = np.random.default_rng(seed)
     cover = Coverage(polygon=ROAD)
-    t_out = (250.0 - 60.0) / 27.5
+    t_out = (250.0 + 80.0) / 27.5
     ids = {"A": set(), "B": set()}
     gone = None
     for k in range(int((t_out + gap + 6.0) / 0.1)):
         s = 0.1 * k
-        cars = {"A": np.array([60.0 + 27.5 * s, -1.75])}
+        cars = {"A": np.array([-80.0 + 27.5 * s, -1.75])}
         if s >= t_out + gap:
             cars["B"] = np.array([250.0 - 21.0 * (s - t_out - gap), 1.75])
         cars = {n: p for n, p in cars.items() if 30.0 <= p[0] <= 250.0}
@@ -1058,3 +1058,110 @@ def test_a_track_seen_by_a_slower_radar_only_is_not_taken_for_gone():
             ids |= {c.id for c in res.confirmed() if np.hypot(*np.subtract(c.position, p)) < 300}
             assert any(np.hypot(*np.subtract(c.position, p)) < 300 for c in res.confirmed())
     assert len(ids) == 1
+
+
+def _box(x0, y0, x1, y1):
+    return Coverage(polygon=np.array([[x0, y0], [x1, y0], [x1, y1], [x0, y1]], dtype=float))
+
+
+def _seen_at(t, z, sensor, sigma, coverage):
+    return replace(scan_at(t, z, sensor, sigma=sigma), coverage=coverage)
+
+
+def test_a_sensor_that_pauses_keeps_its_tracks():
+    """Two 10 Hz sensors look at two areas; the first is silent for a second while the
+    second goes on. Its target's track is in its field of regard: it waits (a first rule,
+    the track's revisit alone, deleted it at the second's batches and gave a new id)."""
+    tr = IndividualTracker(TrackerConfig())
+    rng = np.random.default_rng(0)
+    a, b = _box(0, 0, 1000, 1000), _box(2000, 0, 3000, 1000)
+    ids, deleted = set(), []
+    for k in range(400):
+        t = 0.1 * k
+        p, q = np.array([100 + 10 * t, 500.0]), np.array([2100 + 10 * t, 500.0])
+        if not 20.0 <= t < 21.0:
+            res = tr.step(_seen_at(t, [p + rng.normal(0, 1, 2)], "a", 1.0, a))
+            deleted += res.deleted
+            if t > 5:
+                ids |= {c.id for c in res.confirmed() if np.hypot(*np.subtract(c.position, p)) < 10}
+        deleted += tr.step(_seen_at(t + 0.05, [q + rng.normal(0, 1, 2)], "b", 1.0, b)).deleted
+    assert deleted == [] and len(ids) == 1
+
+
+def test_a_target_of_a_radar_reporting_sectors_is_not_taken_for_gone():
+    """The slower radar of the test above reports its 4 s turn in 8 sectors, each stating
+    its polygon: its batches come every 0.5 s, but a sector looks at the target once a turn.
+    The union of its last sectors is its field of regard, and the target's track lives."""
+    centre, reach, ns = np.array([10e3, -20e3]), 40e3, 8
+
+    def sector(i):
+        a = np.linspace(2 * math.pi * i / ns, 2 * math.pi * (i + 1) / ns, 9)
+        rim = centre + reach * np.column_stack([np.cos(a), np.sin(a)])
+        return Coverage(polygon=np.vstack([centre, rim]))
+
+    tr = IndividualTracker(TrackerConfig())
+    rng = np.random.default_rng(0)
+    fast = _box(0.0, -5e3, 10e3, 5e3)
+    events = sorted(
+        [(0.5 * k, "fast", 0) for k in range(240)]
+        + [(0.25 + 0.5 * k, "slow", k % ns) for k in range(240)]
+    )
+    ids = set()
+    for t, sensor, i in events:
+        p = np.array([2e3 + 200.0 * t, 1e3])  # out of the fast sensor's view at 40 s
+        cover = sector(i) if sensor == "slow" else fast
+        seen = cover.contains(p[None])[0] and (sensor == "fast" or rng.random() < 0.9)
+        z = [p + rng.normal(0, 30.0, 2)] if seen else []
+        res = tr.step(_seen_at(t, z, sensor, 30.0, cover))
+        if 10.0 <= t <= 80.0:
+            near = {c.id for c in res.confirmed() if np.hypot(*np.subtract(c.position, p)) < 300}
+            assert near, t
+            ids |= near
+    assert len(ids) == 1
+
+
+def test_a_restored_tracker_waits_for_the_slower_radar():
+    """Fields of regard are not saved: restored at 50 s, the tracker knows none, and takes
+    no track for gone until the slower radar (4 s) has reported again."""
+    tr = IndividualTracker(TrackerConfig())
+    rng = np.random.default_rng(5)
+    fast = _box(0.0, -5e3, 10e3, 5e3)
+    slow = Coverage(centre=np.array([10e3, 0.0]), max_range=30e3)
+    ids = set()
+    for k in range(240):
+        t = 0.5 * k
+        if k == 100:
+            saved = tr.export_state()
+            tr = IndividualTracker(TrackerConfig())
+            tr.import_state(saved)
+        p = np.array([2e3 + 200.0 * t, 1e3])
+        if k % 8 == 0:
+            res = tr.step(_seen_at(t, [p + rng.normal(0, 30.0, 2)], "slow", 30.0, slow))
+        else:
+            z = [p + rng.normal(0, 30.0, 2)] if p[0] <= 10e3 else []
+            res = tr.step(_seen_at(t, z, "fast", 30.0, fast))
+        if t >= 10.0:
+            near = {c.id for c in res.confirmed() if np.hypot(*np.subtract(c.position, p)) < 300}
+            assert near, t
+            ids |= near
+    assert len(ids) == 1
+
+
+def test_a_slow_sensor_elsewhere_does_not_keep_a_gone_track():
+    """A second sensor far away (empty batches every 4 s over its own area): the car that
+    left the road radar's coverage is in neither field of regard, and its track goes as
+    soon as without that sensor."""
+    tr = IndividualTracker(TrackerConfig())
+    rng = np.random.default_rng(2)
+    road, far = Coverage(polygon=ROAD), _box(5e3, 5e3, 6e3, 6e3)
+    t_out, gone = (250.0 + 80.0) / 27.5, None
+    for k in range(250):
+        s = 0.1 * k
+        p = np.array([-80.0 + 27.5 * s, -1.75])
+        z = [p + rng.normal(0.0, 0.5, 2)] if 30.0 <= p[0] <= 250.0 and rng.random() < 0.95 else []
+        res = tr.step(replace(scan_at(s, z, pd=0.95, sigma=0.5), coverage=road))
+        if res.deleted and gone is None and s > t_out:
+            gone = s - t_out
+        if k % 40 == 20:
+            tr.step(_seen_at(s + 0.05, [], "far", 30.0, far))
+    assert gone is not None and gone < 1.0
