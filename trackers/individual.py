@@ -327,6 +327,9 @@ def _regarded(
     areas = () if old is None else old.areas
     if not areas or not _same_area(areas[-1], scan.coverage):
         areas = (*areas, scan.coverage)[-REGARD_SCANS:]
+        sizes = [0 if a is None or a.polygon is None else len(a.polygon) for a in areas]
+        while len(areas) > 1 and sum(sizes) > REGARD_VERTICES:
+            areas, sizes = areas[1:], sizes[1:]
     out[scan.sensor_id] = _Regard(t, areas)  # the most recently heard last
     while len(out) > MAX_REGARDS:
         del out[next(iter(out))]
@@ -335,6 +338,11 @@ def _regarded(
 
 #: At most this many sensors' fields of regard are kept.
 MAX_REGARDS = 256
+
+#: A sensor's field of regard keeps its newest areas up to this many polygon vertices in all
+#: (at least one area: a stated polygon has at most 1024), so that 256 sensors stating large
+#: polygons that change at every batch hold some 16 MB, not 130.
+REGARD_VERTICES = 4096
 
 
 class _Counters:

@@ -1165,3 +1165,19 @@ def test_a_slow_sensor_elsewhere_does_not_keep_a_gone_track():
         if k % 40 == 20:
             tr.step(_seen_at(s + 0.05, [], "far", 30.0, far))
     assert gone is not None and gone < 1.0
+
+
+def test_a_field_of_regard_holds_a_bounded_number_of_vertices():
+    """A sensor stating a large polygon that changes at every batch: its field of regard
+    keeps its newest areas up to REGARD_VERTICES vertices, not REGARD_SCANS polygons."""
+    from trackers.individual import REGARD_VERTICES
+
+    tr = IndividualTracker(TrackerConfig())
+    a = np.linspace(0.0, 2 * math.pi, 1000, endpoint=False)
+    for k in range(40):
+        ring = Coverage(polygon=(1000.0 + k) * np.column_stack([np.cos(a), np.sin(a)]))
+        tr.step(_seen_at(float(k), [], "wide", 10.0, ring))
+    areas = tr._state.regard["wide"].areas
+    assert len(areas) == REGARD_VERTICES // 1000
+    assert sum(len(x.polygon) for x in areas) <= REGARD_VERTICES
+    assert areas[-1].polygon[0, 0] == 1039.0
