@@ -55,6 +55,7 @@ __all__ = [
     "point_in_polygon",
     "polygon_arc",
     "polygon_distance",
+    "same_area",
     "visible_fraction",
 ]
 
@@ -313,6 +314,28 @@ def _share(coverage: Coverage, points: np.ndarray) -> np.ndarray:
     """The share of each row's sample points ``points (n, S, 2)`` in view."""
     n = points.shape[0]
     return coverage.contains(points.reshape(-1, 2)).reshape(n, -1).mean(axis=1)
+
+
+def same_area(a: Coverage | None, b: Coverage | None) -> bool:
+    """Whether two coverages are one area (``None``: everywhere): the same polygon, centre
+    and range, or both nowhere."""
+    if a is None or b is None:
+        return a is b
+    if a is b:
+        return True
+    if a.nowhere or b.nowhere:
+        return a.nowhere == b.nowhere
+    return (
+        a.max_range == b.max_range
+        and _same_points(a.centre, b.centre)
+        and _same_points(a.polygon, b.polygon)
+    )
+
+
+def _same_points(a: np.ndarray | None, b: np.ndarray | None) -> bool:
+    if a is None or b is None:
+        return a is b
+    return a.shape == b.shape and bool(np.array_equal(a, b))
 
 
 def visible_fraction(coverage: Coverage, mean: np.ndarray, cov: np.ndarray) -> np.ndarray:

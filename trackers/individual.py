@@ -47,9 +47,10 @@ from trackers.association.manoeuvre import (
 )
 from trackers.association.spatial import pairs_within
 from trackers.config import InitiationConfig, MeasurementConfig, TrackerConfig
-from trackers.coverage import Coverage, disc_fraction, visible_fraction
+from trackers.coverage import Coverage, disc_fraction, same_area, visible_fraction
 from trackers.detection_rate import (
     LOOK_MIN_HITS,
+    MAX_SENSORS,
     MIN_MISSES,
     DetectionRates,
     coast_revisits,
@@ -285,27 +286,6 @@ class _Regard:
     areas: tuple[Coverage | None, ...]
 
 
-def _same_area(a: Coverage | None, b: Coverage | None) -> bool:
-    """Whether two scans' coverages are one area (``None``: everywhere)."""
-    if a is None or b is None:
-        return a is b
-    if a is b:
-        return True
-    if a.nowhere or b.nowhere:
-        return a.nowhere == b.nowhere
-    return (
-        a.max_range == b.max_range
-        and _same_points(a.centre, b.centre)
-        and _same_points(a.polygon, b.polygon)
-    )
-
-
-def _same_points(a: np.ndarray | None, b: np.ndarray | None) -> bool:
-    if a is None or b is None:
-        return a is b
-    return a.shape == b.shape and bool(np.array_equal(a, b))
-
-
 def _regarded(
     regard: Mapping[str, _Regard],
     scan: Scan,
@@ -314,8 +294,8 @@ def _regarded(
 ) -> Mapping[str, _Regard]:
     """The fields of regard with ``scan``'s area added to its sensor's; those of sensors
     silent for longer than :data:`REGARD_INTERVALS` of their intervals (at least
-    ``max_coast``) dropped, and no more than :data:`MAX_REGARDS` kept (the least recently
-    heard goes first)."""
+    ``max_coast``) dropped, and no more than the detection rates' :data:`MAX_SENSORS` kept
+    (the least recently heard goes first)."""
     t = float(scan.time)
     out: dict[str, _Regard] = {}
     for sensor, r in regard.items():
@@ -325,19 +305,16 @@ def _regarded(
             out[sensor] = r
     old = regard.get(scan.sensor_id)
     areas = () if old is None else old.areas
-    if not areas or not _same_area(areas[-1], scan.coverage):
+    if not areas or not same_area(areas[-1], scan.coverage):
         areas = (*areas, scan.coverage)[-REGARD_SCANS:]
         sizes = [0 if a is None or a.polygon is None else len(a.polygon) for a in areas]
         while len(areas) > 1 and sum(sizes) > REGARD_VERTICES:
             areas, sizes = areas[1:], sizes[1:]
     out[scan.sensor_id] = _Regard(t, areas)  # the most recently heard last
-    while len(out) > MAX_REGARDS:
+    while len(out) > MAX_SENSORS:
         del out[next(iter(out))]
     return MappingProxyType(out)
 
-
-#: At most this many sensors' fields of regard are kept.
-MAX_REGARDS = 256
 
 #: A sensor's field of regard keeps its newest areas up to this many polygon vertices in all
 #: (at least one area: a stated polygon has at most 1024), so that 256 sensors stating large
