@@ -35,6 +35,7 @@ import numpy as np
 
 from service.config_store import ConfigApplied, ConfigStore
 from service.convert import batch_to_scan, dumps, empty_report, report_dict, track_to_dict
+from service.id_reserve import IdReservation
 from service.ingest import (
     IngestResult,
     Item,
@@ -208,6 +209,7 @@ class Engine:
         max_batch_bytes: int = DEFAULT_MAX_BATCH_BYTES,
         queue_bytes: int = DEFAULT_QUEUE_BYTES,
         state_store: StateStore | None = None,
+        id_reservation: IdReservation | None = None,
     ) -> None:
         defaults = ingest_defaults or IngestConfig()
         self._config = ConfigStore(
@@ -257,6 +259,8 @@ class Engine:
         self._state_store = state_store
         self._checkpoint: EngineCheckpoint | None = None
         self._restore_pending = state_store is not None
+        # the track id reservation (service.id_reserve): ids a restart does not give again
+        self._ids = id_reservation
         # scale-out: tracks handed over from and to other instances, applied by the worker
         # before its next batch; ``on_report(state)`` runs on the worker after each batch
         self._hand_lock = threading.Lock()
@@ -289,6 +293,8 @@ class Engine:
                 self._restore_pending = False
                 self._restore(self._state_store)
             self._state_store.start(lambda: self._checkpoint)
+        if self._ids is not None:  # after the restore: past its counters too
+            self._ids.begin(self._pipeline)
         self._thread = threading.Thread(target=self._run, name="tracker-engine", daemon=True)
         self._thread.start()
 
@@ -302,12 +308,15 @@ class Engine:
         with contextlib.suppress(queue.Full):
             self._queue.put(_STOP, timeout=min(timeout, 0.5))
         self._thread.join(timeout)
-        if self._thread.is_alive():
+        stuck = self._thread.is_alive()
+        if stuck:
             log.warning("tracker worker did not stop within %.1f s", timeout)
         self._thread = None
         if self._state_store is not None:  # the state after the last batch processed
             self._state_store.stop()
             self._state_store.save_logged(self._checkpoint)
+        if self._ids is not None and not stuck:  # (a worker still running may number more)
+            self._ids.end(self._pipeline)
 
     @property
     def running(self) -> bool:
@@ -468,6 +477,7 @@ class Engine:
         stayed full for ``timeout`` seconds, or when the worker did not start the command
         within ``timeout`` seconds (it then never runs). A command takes a queue slot but none
         of the queue's bytes; ``fn`` must be quick, as batches wait behind it."""
+        fn = self._numbering(fn)
         if self._thread is not None and threading.current_thread() is self._thread:
             return fn(self._pipeline)  # from the worker itself: queueing would deadlock
         if self._stopping.is_set() or not self.running:
@@ -490,6 +500,21 @@ class Engine:
                 ) from None
             result = future.result()  # running now: its answer comes soon
         return result
+
+    def _numbering(self, fn: Callable[[TrackingPipeline], T]) -> Callable[[TrackingPipeline], T]:
+        """``fn`` followed, before its answer goes out, by the id reservation's check (a
+        track started by hand takes an id)."""
+        ids = self._ids
+        if ids is None:
+            return fn
+
+        def checked(pipeline: TrackingPipeline) -> T:
+            try:
+                return fn(pipeline)
+            finally:
+                ids.check(pipeline)
+
+        return checked
 
     def _start_by_hand(
         self,
@@ -1051,6 +1076,8 @@ class Engine:
             self._forget(item, batch)
             self._refusals.reject(item, "internal_error", f"{type(exc).__name__}: {exc}", batch)
             return
+        if self._ids is not None:  # before any report shows a new id
+            self._ids.check(pipeline)
         if batch.cov is None and len(self._no_cov_sensors) < MAX_NO_COV_NOTES:
             self._note_missing_covariance(batch, pipeline.config.measurement.position_std)
         if result.range_rates[0]:

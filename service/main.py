@@ -42,6 +42,7 @@ from service.config_store import config_changes, load_config_file
 from service.config_tree import ConfigDocument, ConfigError, ConfigPatch, config_document
 from service.engine import Engine
 from service.files import remove_stale_temporaries
+from service.id_reserve import IdReservation, id_file
 from service.keys import Keys, local_endpoints
 from service.scale_out import ScaleOut, Sector
 from service.schemas import DetectionBatchIn, IngestConfig
@@ -434,10 +435,14 @@ def create_app(settings: Settings | None = None, token_source: str | None = None
         "none (changes are not saved)"
         if settings.config_file is None
         else f"{settings.config_file} ({'loaded' if loaded else 'written at the first change'})",
-        "not saved (a restart begins with none, and ids from T1 again: --state-file keeps them)"
+        "not saved (a restart begins with none: --state-file keeps them)"
         if settings.state_file is None
         else f"saved to {settings.state_file}",
     )
+    ids = IdReservation(
+        id_file(settings.state_dir, settings.instance_id if settings.scale_out else None)
+    )
+    log.info("track ids: never given twice, across restarts too (reserved in %s)", ids.path)
     stats = Stats(settings.instance_id, settings.ingest_queue_size)
     engine = Engine(
         tracker_config,
@@ -450,6 +455,7 @@ def create_app(settings: Settings | None = None, token_source: str | None = None
         ingest_defaults=ingest_defaults,
         config_file=settings.config_file,
         state_store=_state_store(settings),
+        id_reservation=ids,
         pipeline_factory=functools.partial(
             TrackingPipeline.all_kinds,
             id_prefix=f"{settings.instance_id}:" if settings.scale_out else "",

@@ -43,6 +43,15 @@ def _no_real_state_folder(tmp_path_factory: pytest.TempPathFactory) -> Iterator[
             os.environ["XDG_STATE_HOME"] = old
 
 
+@pytest.fixture(autouse=True)
+def _own_state_folder(
+    tmp_path_factory: pytest.TempPathFactory, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Each test's services keep their default state folder (their config file and track id
+    reservation) in a folder of the test's own, so that no test sees another's ids."""
+    monkeypatch.setenv("XDG_STATE_HOME", str(tmp_path_factory.mktemp("state")))
+
+
 @pytest.fixture
 def port() -> int:
     return free_port()

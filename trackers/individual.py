@@ -497,6 +497,19 @@ class IndividualTracker:
         self._version += 1
         self._prediction = None
 
+    @property
+    def next_id(self) -> int:
+        """The number of the next track's id (``T{next_id}``)."""
+        return self._state.next_id
+
+    def skip_ids(self, first: int) -> None:
+        """Give no id numbered below ``first`` from now on (ids a run before a restart gave:
+        :class:`~trackers.peers.NumbersTracks`); a counter already past it stays."""
+        if int(first) > self._state.next_id:
+            self._state = replace(self._state, next_id=int(first))
+            self._version += 1
+            self._prediction = None
+
     def propose(self, scan: Scan, directives: PointDirectives | None = None) -> PointProposal:
         """The step for ``scan`` under the peers' ``directives``, without changing the tracker."""
         directives = directives or PointDirectives()

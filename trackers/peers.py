@@ -43,7 +43,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING, Any, Protocol, runtime_checkable
 
 import numpy as np
@@ -57,6 +57,7 @@ if TYPE_CHECKING:
 
 __all__ = [
     "HeldDetections",
+    "NumbersTracks",
     "PeerError",
     "PeerProposal",
     "PeerTracker",
@@ -256,6 +257,20 @@ class PersistentTracker(Protocol):
     def restore_state(self, checked: Any) -> None: ...
 
 
+@runtime_checkable
+class NumbersTracks(Protocol):
+    """Optional, for peers and point trackers: a tracker that numbers its tracks' ids from a
+    counter. ``skip_ids(first)`` makes it give no id numbered below ``first`` (a counter
+    already past it stays): the service moves the counters past the ids a run before a
+    restart gave, so that no id is given twice (:meth:`TrackingPipeline.skip_ids
+    <trackers.pipeline.TrackingPipeline.skip_ids>`)."""
+
+    @property
+    def next_id(self) -> int: ...
+
+    def skip_ids(self, first: int) -> None: ...
+
+
 class SavesImmutableState:
     """The :class:`PersistentTracker` methods of a tracker whose whole state is one immutable
     object, ``self._state`` (so a checkpoint just holds it): the class names its checkpoint
@@ -292,6 +307,16 @@ class SavesImmutableState:
     #: The fields of ``self._state`` that :meth:`reset` keeps (the configuration and the id
     #: counter); the others go back to their defaults.
     _kept_on_reset: tuple[str, ...] = ()
+
+    @property
+    def next_id(self) -> int:
+        """The number of the next track's id (:class:`NumbersTracks`)."""
+        return int(self._state.next_id)
+
+    def skip_ids(self, first: int) -> None:
+        """Give no id numbered below ``first`` from now on (:class:`NumbersTracks`)."""
+        if int(first) > self._state.next_id:
+            self._state = replace(self._state, next_id=int(first))
 
     def reset(self) -> None:
         """Drop every track and what was learned; the configuration and the id counter stay,

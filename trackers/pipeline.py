@@ -17,7 +17,7 @@ The point tracker is chosen by ``association.method`` (:data:`POINT_TRACKERS`) o
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import replace
 from typing import Any
 
@@ -32,6 +32,7 @@ from trackers.formation.tracker import FormationTracker
 from trackers.individual import IndividualTracker
 from trackers.pattern.tracker import PatternTracker
 from trackers.peers import (
+    NumbersTracks,
     PeerError,
     PeerProposal,
     PeerTracker,
@@ -577,6 +578,27 @@ class TrackingPipeline:
         # the detections tentative tracks held back belong to tracks and serial numbers of
         # the state left: the restored tracker gives those numbers and ids again
         self._clutter.forget_held()
+
+    # -- id counters -----------------------------------------------------------------------
+
+    def id_counters(self) -> dict[str, int]:
+        """The number of the next id of each tracker that numbers its tracks
+        (:class:`~trackers.peers.NumbersTracks`), by its kind."""
+        # (getattr: an isinstance on a Protocol costs ~10 µs a tracker, and this runs a batch)
+        return {
+            tracker.kind: tracker.next_id
+            for tracker in (self.point, *self.peers)
+            if getattr(tracker, "skip_ids", None) is not None
+        }
+
+    def skip_ids(self, counters: Mapping[str, int]) -> None:
+        """Make each tracker whose kind ``counters`` names give no id numbered below its
+        number (ids given before a restart; a counter already past it stays). Kinds that
+        this pipeline does not run, or whose tracker gives no numbered ids, are ignored."""
+        for tracker in (self.point, *self.peers):
+            first = counters.get(tracker.kind)
+            if first is not None and isinstance(tracker, NumbersTracks):
+                tracker.skip_ids(first)
 
     def snapshot(self) -> tuple[TrackSnapshot, ...]:
         """Every live track of every kind, as of the last processed scan."""

@@ -4,6 +4,7 @@ saved counter, and what crashed saves left behind is removed at start."""
 
 from __future__ import annotations
 
+import json
 import os
 import subprocess
 import sys
@@ -160,3 +161,40 @@ def test_an_extended_track_survives_a_restart(
         r = http.post("/api/v1/tracks/extended", json=elsewhere, headers=auth)
         assert r.status_code == 201 and r.json()["id"] != started["id"]
     assert again.terminate()[0] == 0
+
+
+def test_without_a_state_file_a_restart_gives_no_id_twice(
+    processes: list[ServiceProcess], tmp_path: Path, payloads: list[bytes]
+) -> None:
+    """No state file: a restart begins with no tracks, but its ids go on past those given
+    (the reservation in the state folder): from the next one after a clean stop, from the
+    reservation after kill -9."""
+    args = ("--api-token", "t", "--state-dir", str(tmp_path))
+    reservation = tmp_path / "ids.json"
+
+    def reserved() -> int:
+        return int(json.loads(reservation.read_text())["reserved"]["individual"])
+
+    def numbers(svc: ServiceProcess) -> set[int]:
+        return {int(t["id"][1:]) for t in _tracks(svc, "all")["tracks"]}
+
+    svc = _start(processes, *args)
+    _post_all(svc, payloads[:30])
+    first = numbers(svc)
+    assert svc.terminate()[0] == 0
+    next_id = reserved()  # shrunk at the clean stop to the next id
+    assert max(first) < next_id < max(first) + 100
+
+    again = _start(processes, *args)
+    assert _tracks(again)["tracks"] == []
+    _post_all(again, payloads[:30])  # the same batches: a new time line, new tracks
+    second = numbers(again)
+    assert min(second) >= next_id and max(second) < next_id + 1000  # no block skipped
+    in_force = reserved()
+    assert in_force > max(second)
+    again.kill()  # SIGKILL: the reservation stays as it was
+
+    third = _start(processes, *args)
+    _post_all(third, payloads[:30])
+    assert min(numbers(third)) >= in_force
+    assert third.terminate()[0] == 0

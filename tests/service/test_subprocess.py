@@ -214,8 +214,9 @@ def test_start_says_where_token_and_configuration_are(
     assert code == 0 and "s3cret" not in out + err
     assert "the token for writes comes from the --api-token flag (not shown)" in err
     assert f"state folder {state}; configuration file {conf} (written at the first change)" in err
-    # a newcomer's restart lost every track and gave their ids to other targets, unsaid
-    assert "tracks not saved (a restart begins with none, and ids from T1 again" in err
+    # a newcomer's restart loses every track (said), but gives their ids to no other target
+    assert "tracks not saved (a restart begins with none: --state-file keeps them)" in err
+    assert f"track ids: never given twice, across restarts too (reserved in {state}" in err
     assert f"configuration applied: motion.q_cv 0.5 -> 1.0; saved to {conf}" in err
 
     # the next start loads it; --config-file none neither loads nor saves

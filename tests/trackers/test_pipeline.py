@@ -423,6 +423,31 @@ def test_a_reset_drops_the_tracks_and_the_time_and_ids_go_on() -> None:
     assert min(int(i[1:]) for i in after if i.startswith("T")) > last
 
 
+def test_skip_ids_moves_each_counter_past_the_ids_given_before() -> None:
+    """``skip_ids`` (the service's id reservation after a restart): each named tracker gives
+    no id below its number, a counter is never moved back, unknown kinds are ignored."""
+    from clients.scenarios.multitarget import reference_scenario, simulate
+
+    p = TrackingPipeline.all_kinds()
+    assert p.id_counters() == {"individual": 1, "point_patterns": 1, "extended": 1, "formation": 1}
+    p.skip_ids({"individual": 500, "extended": 30, "formation": 7, "radar": 9})
+    p.skip_ids({"individual": 2, "point_patterns": 3})  # lower: stays at 500
+    assert p.id_counters() == {
+        "individual": 500,
+        "point_patterns": 3,
+        "extended": 30,
+        "formation": 7,
+    }
+    for scan in [s.to_scan() for s in simulate(reference_scenario(1))][:5]:
+        p.process(scan)
+    numbers = sorted(int(t.id[1:]) for t in p.snapshot() if t.id.startswith("T"))
+    assert numbers[0] == 500
+    assert p.id_counters()["individual"] == numbers[-1] + 1
+    extended = next(peer for peer in p.peers if peer.kind == "extended")
+    track = extended.start(p.last_time, np.array([9e4, 9e4]), np.zeros(2), np.eye(2) * 400.0)
+    assert track.id == "E30" and p.id_counters()["extended"] == 31
+
+
 def test_a_sensor_position_beyond_the_position_bound_is_refused() -> None:
     """Finite but absurd (1e200 m): its detections' range from it overflowed in the coverage
     learner, whose saved state then failed to restore."""
