@@ -1851,8 +1851,9 @@ def _left_view(
 ) -> np.ndarray:
     """Of the tracks ``idle`` (indices of the predicted tracks out of this scan's view;
     ``revisit`` their :func:`_revisit_time`), a mask of those that have left every sensor's
-    view: confirmed with detections of :data:`COAST_MIN_INSTANTS` instants or more (a revisit
-    read from them), looked at by no scan for :data:`LOOK_CYCLES` of their revisits, and in
+    view: confirmed (young ones too: the revisit of one with detections of fewer than
+    :data:`COAST_MIN_INSTANTS` instants is its sensor's interval, up to its own mean gap),
+    looked at by no scan for :data:`LOOK_CYCLES` of their revisits, and in
     no sensor's field of regard (``regard``: less than :data:`REGARD_SHARE` of the predicted
     position in each area its last scans looked at). None while the fields of regard are
     younger than ``max_coast`` (the tracker started, was reset or restored at ``since``). A
@@ -1860,11 +1861,7 @@ def _left_view(
     a rotating radar that reports its turn by sectors, in the view of a slower radar only or
     of a sensor that paused is not."""
     tracks = pred.tracks
-    out = (
-        tracks.confirmed[idle]
-        & (tracks.instants[idle] >= COAST_MIN_INSTANTS)
-        & (t - tracks.looked[idle] > LOOK_CYCLES * revisit)
-    )
+    out = tracks.confirmed[idle] & (t - tracks.looked[idle] > LOOK_CYCLES * revisit)
     if not out.any() or t - since < max_coast:
         return np.zeros(idle.size, dtype=bool)
     at = idle[out]

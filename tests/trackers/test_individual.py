@@ -1025,6 +1025,31 @@ def test_a_track_that_leaves_the_stated_coverage_is_deleted_soon(seed):
     assert len(ids["A"]) == 1 and gone is not None and gone < 1.0
 
 
+def test_a_young_confirmed_track_that_leaves_the_coverage_goes_too():
+    """A track confirmed on a few detections (a fast crosser, or clutter the tracker took for
+    one) that leaves every stated coverage: its revisit is its sensor's interval, and it goes
+    after LOOK_CYCLES of them, instead of coasting 10 s and kilometres beyond the coverage
+    (an airport radar's clutter track at 450 m/s, reported 3.9 km outside)."""
+    from trackers.individual import LOOK_CYCLES
+
+    cover = Coverage(
+        polygon=np.array([[0.0, -500.0], [1200.0, -500.0], [1200.0, 500.0], [0.0, 500.0]])
+    )
+    tr = IndividualTracker(TrackerConfig())
+    inside, confirmed, gone = 0, set(), None
+    for k in range(30):
+        t = float(k)
+        x = 300.0 * (k - 12) + 50.0  # in the coverage at t = 12..15 s, gone at 16 s
+        z = [(x, 20.0)] if 0.0 <= x <= 1200.0 else []
+        inside += bool(z)
+        res = tr.step(replace(scan_at(t, z, pd=0.99, lam=1e-8), coverage=cover))
+        confirmed |= {c.id for c in res.confirmed()}
+        if confirmed & set(res.deleted) and gone is None:
+            gone = t - 15.0  # since its last detection
+    assert inside == 4 and len(confirmed) == 1
+    assert gone is not None and gone <= LOOK_CYCLES + 1.0
+
+
 @pytest.mark.parametrize("seed", [3, 4, 9])
 def test_a_car_that_comes_in_where_another_left_gets_its_own_id(seed):
     """Car B comes in 9.5 s after car A left there, the other way: A's track, coasting out
