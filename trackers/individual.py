@@ -294,13 +294,14 @@ def _regarded(
 ) -> Mapping[str, _Regard]:
     """The fields of regard with ``scan``'s area added to its sensor's; those of sensors
     silent for longer than :data:`REGARD_INTERVALS` of their intervals (at least
-    ``max_coast``) dropped, and no more than the detection rates' :data:`MAX_SENSORS` kept
-    (the least recently heard goes first)."""
+    ``max_coast``; of ``max_coast`` while a sensor's interval is unknown: a 12 s radar heard
+    once is not forgotten before its second scan) dropped, and no more than the detection
+    rates' :data:`MAX_SENSORS` kept (the least recently heard goes first)."""
     t = float(scan.time)
     out: dict[str, _Regard] = {}
     for sensor, r in regard.items():
         if sensor != scan.sensor_id and t - r.time <= max(
-            max_coast, REGARD_INTERVALS * rates.interval(sensor)
+            max_coast, REGARD_INTERVALS * (rates.interval(sensor) or max_coast)
         ):
             out[sensor] = r
     old = regard.get(scan.sensor_id)

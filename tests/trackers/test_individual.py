@@ -1050,6 +1050,34 @@ def test_a_young_confirmed_track_that_leaves_the_coverage_goes_too():
     assert gone is not None and gone <= LOOK_CYCLES + 1.0
 
 
+@pytest.mark.parametrize("slow_cover", ["disc", "none"])
+def test_a_slow_radar_heard_once_keeps_a_young_track(slow_cover):
+    """A 12 s radar S (a 30 km disc, or no stated coverage) heard once so far, and a 1 s
+    radar F (a 1 km box): a target crosses F's box in 4 detections, then flies on in S's
+    view only. S's field of regard was forgotten 10 s after its first scan (its interval
+    still unknown), so the young track lay in no field of regard and was deleted 1.5 s
+    before S's second look, its target getting a new id (a review's case)."""
+    box = np.array([[0.0, -1000.0], [1000.0, -1000.0], [1000.0, 1000.0], [0.0, 1000.0]])
+    cover_f = Coverage(polygon=box)
+    cover_s = Coverage(centre=np.array([5000.0, 0.0]), max_range=30e3)
+    events = [(float(k), "F", cover_f) for k in range(40)]
+    events += [(0.5 + 12.0 * k, "S", cover_s if slow_cover == "disc" else None) for k in range(4)]
+    events.sort(key=lambda e: e[0])
+    tr = IndividualTracker(TrackerConfig())
+    rng = np.random.default_rng(1)
+    ids: set[str] = set()
+    for t, sensor, cover in events:
+        p = None if t < 3.0 else np.array([300.0 * (t - 3.0) + 20.0, 0.0])
+        seen = p is not None and (sensor == "S" or 0.0 <= p[0] <= 1000.0)
+        z = [p + rng.normal(0.0, 30.0, 2)] if seen else []
+        scan = replace(scan_at(t, z, sensor=sensor, pd=0.9, lam=1e-9, sigma=30.0), coverage=cover)
+        res = tr.step(scan)
+        assert not ids & set(res.deleted), (t, sensor)
+        if p is not None:
+            ids |= {c.id for c in res.confirmed() if np.hypot(*np.subtract(c.position, p)) < 1500}
+    assert len(ids) == 1
+
+
 @pytest.mark.parametrize("seed", [3, 4, 9])
 def test_a_car_that_comes_in_where_another_left_gets_its_own_id(seed):
     """Car B comes in 9.5 s after car A left there, the other way: A's track, coasting out
