@@ -133,6 +133,10 @@ class IdReservation:
         self._on = True
         self._reserved = dict(saved)
         self._reserve(pipeline.id_counters())
+        if self.active:
+            log.info(
+                "track ids: never given twice, across restarts too (reserved in %s)", self.path
+            )
 
     def check(self, pipeline: TrackingPipeline) -> None:
         """After ids may have been given: a new reservation if a counter reached the one on

@@ -442,7 +442,6 @@ def create_app(settings: Settings | None = None, token_source: str | None = None
     ids = IdReservation(
         id_file(settings.state_dir, settings.instance_id if settings.scale_out else None)
     )
-    log.info("track ids: never given twice, across restarts too (reserved in %s)", ids.path)
     stats = Stats(settings.instance_id, settings.ingest_queue_size)
     engine = Engine(
         tracker_config,

@@ -1852,9 +1852,8 @@ def _left_view(
 ) -> np.ndarray:
     """Of the tracks ``idle`` (indices of the predicted tracks out of this scan's view;
     ``revisit`` their :func:`_revisit_time`), a mask of those that have left every sensor's
-    view: confirmed (young ones too: the revisit of one with detections of fewer than
-    :data:`COAST_MIN_INSTANTS` instants is its sensor's interval, up to its own mean gap),
-    looked at by no scan for :data:`LOOK_CYCLES` of their revisits, and in
+    view: confirmed (young ones too), looked at by no scan for :data:`LOOK_CYCLES` of their
+    revisits (read alike for every track, ``max(P_D Δ̄, min(T_s, Δ̄))``), and in
     no sensor's field of regard (``regard``: less than :data:`REGARD_SHARE` of the predicted
     position in each area its last scans looked at). None while the fields of regard are
     younger than ``max_coast`` (the tracker started, was reset or restored at ``since``). A

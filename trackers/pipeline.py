@@ -19,7 +19,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import replace
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 
@@ -584,21 +584,26 @@ class TrackingPipeline:
     def id_counters(self) -> dict[str, int]:
         """The number of the next id of each tracker that numbers its tracks
         (:class:`~trackers.peers.NumbersTracks`), by its kind."""
-        # (getattr: an isinstance on a Protocol costs ~10 µs a tracker, and this runs a batch)
-        return {
-            tracker.kind: tracker.next_id
-            for tracker in (self.point, *self.peers)
-            if getattr(tracker, "skip_ids", None) is not None
-        }
+        return {tracker.kind: tracker.next_id for tracker in self._numbering()}
 
     def skip_ids(self, counters: Mapping[str, int]) -> None:
         """Make each tracker whose kind ``counters`` names give no id numbered below its
         number (ids given before a restart; a counter already past it stays). Kinds that
         this pipeline does not run, or whose tracker gives no numbered ids, are ignored."""
-        for tracker in (self.point, *self.peers):
+        for tracker in self._numbering():
             first = counters.get(tracker.kind)
-            if first is not None and isinstance(tracker, NumbersTracks):
+            if first is not None:
                 tracker.skip_ids(first)
+
+    def _numbering(self) -> list[NumbersTracks]:
+        """The trackers that number their tracks (:class:`~trackers.peers.NumbersTracks`).
+        By ``getattr``: an isinstance on a Protocol costs some 10 µs a tracker, and
+        :meth:`id_counters` runs at every batch."""
+        return [
+            cast(NumbersTracks, tracker)
+            for tracker in (self.point, *self.peers)
+            if getattr(tracker, "skip_ids", None) is not None
+        ]
 
     def snapshot(self) -> tuple[TrackSnapshot, ...]:
         """Every live track of every kind, as of the last processed scan."""
