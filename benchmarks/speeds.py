@@ -3,7 +3,8 @@
     python -m benchmarks.speeds [--seeds 3]
 
 Runs the scenarios of :mod:`clients.scenarios.airspace` (mixed speeds with one radar at
-T = 4 s and T = 1 s; paper 003's formations seen by three unsynchronized radars; a 450 m/s
+T = 4 s, T = 1 s and T = 10 s, the last over its first 16 scans, the scenario's 160 s;
+paper 003's formations seen by three unsynchronized radars; a 450 m/s
 target pulling 4 g at T = 2 s; aircraft braking and speeding up on a runway at T = 4 s;
 aircraft and vehicles setting off from rest near the radar at T = 4 s; a 40 m/s drone weaving
 at 20°/s at T = 1 s) through the tracker with its default configuration and with the
@@ -156,6 +157,9 @@ def main(argv: list[str] | None = None) -> int:
     scenarios = {
         "mixed speeds, T = 4 s": lambda s: mixed_speed_scenario(period=4.0, seed=s),
         "mixed speeds, T = 1 s": lambda s: mixed_speed_scenario(period=1.0, seed=s),
+        "mixed speeds, T = 10 s (16 scans, 8 counted)": lambda s: mixed_speed_scenario(
+            period=10.0, seed=s
+        ),
         "paper 003 formations, 3 radars": lambda s: formation_scenario(seed=s),
         "450 m/s, 4 g turn, T = 2 s": lambda s: manoeuvre_scenario(seed=s),
         "runway: braking 2 m/s², speeding up 2.5 m/s², T = 4 s": lambda s: runway_scenario(seed=s),

@@ -45,9 +45,12 @@ __all__ = [
     "LEARN_SCANS",
     "MAX_SENSORS",
     "MAX_VERTICES",
+    "SECTOR_KEEP_SCANS",
+    "SECTOR_LONG_SPAN",
     "SECTOR_SCANS",
     "SECTOR_SHARE",
     "SECTOR_SPAN",
+    "SECTOR_WINDOW",
     "Coverage",
     "CoverageLearner",
     "bearing_arc",
@@ -79,6 +82,22 @@ LEARN_RANGE_GROWTH = 0.02
 SECTOR_SCANS = 8
 SECTOR_SHARE = 0.4
 SECTOR_SPAN = math.radians(60.0)
+#: ... or when the same holds of its last SECTOR_WINDOW scans with an arc of at least
+#: SECTOR_LONG_SPAN: a radar reporting 48 sectors a turn or more in a sparse scene (14
+#: detections a turn) showed fewer than SECTOR_SCANS sectors with detections in its last
+#: LEARN_SCANS batches and was never taken to sweep (each of its batches missed every track
+#: outside it: no track lived), while a whole-turn radar's few targets, drifting in bearing,
+#: span 60° in 128 turns but not half the circle (a lone target drifting 1.5° a turn or more
+#: does, and is taken for a sweep: its track is then not missed while its batches are empty,
+#: and goes by coasting). Once found, a sweep goes on while SECTOR_KEEP_SCANS of the window's
+#: scans with detections meet the first test (a turn of few detections is no sign that the
+#: radar stopped turning); over the window, up to one odd scan in every LEARN_SCANS is left
+#: out as the first test leaves out one (one in every SECTOR_SCANS with detections at most).
+#: Scans spanning too wide an arc for a sector (more than
+#: SECTOR_SHARE of the circle) count over the last LEARN_SCANS only ...
+SECTOR_WINDOW = 128
+SECTOR_LONG_SPAN = math.radians(180.0)
+SECTOR_KEEP_SCANS = 3
 #: ... and each of its scans then looked at the arc of its own detections, grown on each side
 #: by LEARN_SIGMAS standard deviations of the bearing noise of its nearest detection, at
 #: least SECTOR_MARGIN and at most SECTOR_MAX_MARGIN (rad).
@@ -385,8 +404,9 @@ Box = tuple[float, float, float, float, float, float | None] | None
 #: The arc of bearings ``(start, width)`` (rad) a scan's detections span about its sensor.
 Arc = tuple[float, float] | None
 #: What a :class:`CoverageLearner` knows, least recently heard sensor first: each sensor's id,
-#: when it was last heard and the boxes and arcs of its last :data:`LEARN_SCANS` scans.
-LearnerSnapshot = tuple[tuple[str, float, tuple[Box, ...], tuple[Arc, ...]], ...]
+#: when it was last heard, the boxes of its last :data:`LEARN_SCANS` scans, the arcs of
+#: its last :data:`SECTOR_WINDOW` and whether it was taken to sweep.
+LearnerSnapshot = tuple[tuple[str, float, tuple[Box, ...], tuple[Arc, ...], bool], ...]
 
 
 def _finite(value: Any) -> bool:
@@ -440,19 +460,42 @@ def _arc_of(z: np.ndarray, R: np.ndarray, position: np.ndarray) -> tuple[Arc, fl
     return _arc(np.arctan2(d[:, 1], d[:, 0])), float(ranges[away].min()), sigma
 
 
-def _sweeping(arcs: tuple[Arc, ...]) -> bool:
+def _sweeping(
+    arcs: tuple[Arc, ...],
+    min_scans: int = SECTOR_SCANS,
+    min_span: float = SECTOR_SPAN,
+    odd: int = 1,
+) -> bool:
     """Whether the scans of ``arcs`` (None: no detections or no position) are sectors of a
-    revolution (:data:`SECTOR_SCANS`, :data:`SECTOR_SHARE`, :data:`SECTOR_SPAN`), the widest
-    of them left out (one odd scan does not stop a sweep)."""
-    seen = sorted((a for a in arcs if a is not None), key=lambda a: a[1])[:-1]
-    if len(seen) < SECTOR_SCANS:
+    revolution: at least ``min_scans`` with detections, none spanning more than
+    :data:`SECTOR_SHARE` of the circle or of the arc all of them span together, that arc at
+    least ``min_span`` wide; the widest of them left out, one in every :data:`SECTOR_SCANS`
+    with detections up to ``odd`` (an odd scan does not stop a sweep)."""
+    seen = sorted((a for a in arcs if a is not None), key=lambda a: a[1])
+    seen = seen[: len(seen) - max(1, min(odd, len(seen) // SECTOR_SCANS))]
+    if len(seen) < min_scans:
         return False
     widest = seen[-1][1]
     if widest > SECTOR_SHARE * 2.0 * math.pi:
         return False
     ends = np.array([s for s, _ in seen] + [s + w for s, w in seen])
     span = _arc(ends)[1]
-    return span >= SECTOR_SPAN and widest <= SECTOR_SHARE * span
+    return span >= min_span and widest <= SECTOR_SHARE * span
+
+
+def _sweep_found(arcs: tuple[Arc, ...], was: bool) -> bool:
+    """Whether the arcs of a sensor's last :data:`SECTOR_WINDOW` scans show a sweep: those of
+    its last :data:`LEARN_SCANS` (:func:`_sweeping`), or all of them spanning at least
+    :data:`SECTOR_LONG_SPAN` (a radar of many sectors in a sparse scene); and once found
+    (``was``), while :data:`SECTOR_KEEP_SCANS` of them with detections span
+    :data:`SECTOR_SPAN`; over the whole window, up to one odd scan in every
+    :data:`LEARN_SCANS` is left out."""
+    odd = SECTOR_WINDOW // LEARN_SCANS  # one odd scan in every LEARN_SCANS
+    return (
+        _sweeping(arcs[-LEARN_SCANS:])
+        or _sweeping(arcs, min_span=SECTOR_LONG_SPAN, odd=odd)
+        or (was and _sweeping(arcs, SECTOR_KEEP_SCANS, odd=odd))
+    )
 
 
 def _wide_arcs(arcs: tuple[Arc, ...]) -> int:
@@ -486,9 +529,9 @@ class CoverageLearner:
         self._heard: OrderedDict[str, float] = OrderedDict()
         #: each sensor's position as its last scan that gave one gave it (not saved)
         self._positions: dict[str, np.ndarray] = {}
-        #: the arcs of each sensor's last LEARN_SCANS scans (saved with the boxes), how many
-        #: of them span too much for a sector (more than SECTOR_SHARE of the circle), and
-        #: whether they are sectors of a revolution
+        #: the arcs of each sensor's last SECTOR_WINDOW scans (saved with the boxes), how many
+        #: of the last LEARN_SCANS of them span too much for a sector (more than SECTOR_SHARE
+        #: of the circle), and whether they are sectors of a revolution
         self._arcs: dict[str, tuple[Arc, ...]] = {}
         self._wide: dict[str, int] = {}
         self._sweeping: dict[str, bool] = {}
@@ -572,9 +615,10 @@ class CoverageLearner:
         return arcs[-1] if arcs else None
 
     def sweeping(self, sensor_id: str) -> bool:
-        """Whether ``sensor_id``'s last scans are sectors of a revolution (:data:`SECTOR_SCANS`,
-        :data:`SECTOR_SHARE`, :data:`SECTOR_SPAN`): each scan's detections within a narrow arc
-        of bearings about the sensor, the arcs of its scans together a wide one."""
+        """Whether ``sensor_id``'s last scans are sectors of a revolution (:func:`_sweep_found`:
+        :data:`SECTOR_SCANS`, :data:`SECTOR_SHARE`, :data:`SECTOR_SPAN`,
+        :data:`SECTOR_LONG_SPAN`, :data:`SECTOR_KEEP_SCANS`): each scan's detections within a
+        narrow arc of bearings about the sensor, the arcs of its scans together a wide one."""
         return self._sweeping.get(sensor_id, False)
 
     def sector(
@@ -591,7 +635,7 @@ class CoverageLearner:
         arc, near, sigma = (None, 0.0, 0.0) if z.shape[0] == 0 else _arc_of(z, R, position)
         if arc is None:
             return Coverage.none(learned=True) if self.sweeping(sensor_id) else None
-        if not _sweeping((*arcs[-(LEARN_SCANS - 1) :], arc)):
+        if not _sweep_found((*arcs[-(SECTOR_WINDOW - 1) :], arc), self.sweeping(sensor_id)):
             return None
         boxes = [b for b in self._boxes.get(sensor_id, ()) if b is not None and b[5] is not None]
         far = float(np.max(np.hypot(*(z - np.asarray(position, dtype=float).reshape(1, 2)).T)))
@@ -622,7 +666,7 @@ class CoverageLearner:
         arc = None
         if position is not None and z.shape[0]:
             arc = _arc_of(z, R, position)[0]
-        self._set_arcs(sensor_id, (*self._arcs.get(sensor_id, ())[-(LEARN_SCANS - 1) :], arc))
+        self._set_arcs(sensor_id, (*self._arcs.get(sensor_id, ())[-(SECTOR_WINDOW - 1) :], arc))
         if position is not None:
             self._positions[sensor_id] = np.asarray(position, dtype=float).reshape(2).copy()
         while len(self._heard) > MAX_SENSORS:
@@ -631,10 +675,12 @@ class CoverageLearner:
             self._forget(sid)
 
     def _set_arcs(self, sensor_id: str, arcs: tuple[Arc, ...]) -> None:
-        """Keep ``arcs`` (a sensor's last scans') and whether they are a sweep."""
+        """Keep ``arcs`` (a sensor's last scans') and whether they are a sweep
+        (:func:`_sweep_found`)."""
         self._arcs[sensor_id] = arcs
-        self._wide[sensor_id] = wide = _wide_arcs(arcs)
-        self._sweeping[sensor_id] = wide <= 1 and _sweeping(arcs)
+        self._wide[sensor_id] = wide = _wide_arcs(arcs[-LEARN_SCANS:])
+        was = self._sweeping.get(sensor_id, False)
+        self._sweeping[sensor_id] = wide <= 1 and _sweep_found(arcs, was)
 
     def _forget(self, sensor_id: str) -> None:
         """Drop all that is known of ``sensor_id``."""
@@ -648,14 +694,21 @@ class CoverageLearner:
     def snapshot(self) -> LearnerSnapshot:
         """What the learner knows now, immutable (its boxes are shared, not copied)."""
         return tuple(
-            (sid, t, self._boxes.get(sid, ()), self._arcs.get(sid, ()))
+            (
+                sid,
+                t,
+                self._boxes.get(sid, ()),
+                self._arcs.get(sid, ()),
+                self._sweeping.get(sid, False),
+            )
             for sid, t in self._heard.items()
         )
 
     @staticmethod
     def export(snapshot: LearnerSnapshot) -> dict[str, Any]:
         """``snapshot`` as plain JSON values: ``{"sensors": [{"id", "heard", "boxes",
-        "arcs"}]}`` (``arcs``: ``[start, width]`` or null a scan, since 2026-11-27)."""
+        "arcs", "sweeping"}]}`` (``arcs``: ``[start, width]`` or null a scan, since
+        2026-11-27; ``sweeping``, since 2026-11-27 too: a true or false)."""
         return {
             "sensors": [
                 {
@@ -663,8 +716,9 @@ class CoverageLearner:
                     "heard": t,
                     "boxes": [None if b is None else list(b) for b in boxes],
                     "arcs": [None if a is None else list(a) for a in arcs],
+                    "sweeping": sweeping,
                 }
-                for sid, t, boxes, arcs in snapshot
+                for sid, t, boxes, arcs, sweeping in snapshot
             ]
         }
 
@@ -709,8 +763,8 @@ class CoverageLearner:
                     )
                 )
             arcs = entry.get("arcs", [])  # none in a file written before 2026-11-27
-            if not isinstance(arcs, list) or len(arcs) > LEARN_SCANS:
-                raise ValueError(f"{where}.arcs: a list of at most {LEARN_SCANS}")
+            if not isinstance(arcs, list) or len(arcs) > SECTOR_WINDOW:
+                raise ValueError(f"{where}.arcs: a list of at most {SECTOR_WINDOW}")
             arcs_read: list[Arc] = []
             for a in arcs:
                 ok = a is None or (
@@ -722,9 +776,13 @@ class CoverageLearner:
                 if not ok:
                     raise ValueError(f"{where}.arcs: [start, width] (rad) or null each")
                 arcs_read.append(None if a is None else (float(a[0]), float(a[1])))
+            sweeping = entry.get("sweeping", False)  # none before 2026-11-27: found afresh
+            if not isinstance(sweeping, bool):
+                raise ValueError(f"{where}.sweeping: true or false")
             if entry["id"] in out._heard:
                 raise ValueError(f"{where}.id: {entry['id']!r} twice")
             out._heard[entry["id"]] = float(t)
             out._boxes[entry["id"]] = tuple(read)
+            out._sweeping[entry["id"]] = sweeping
             out._set_arcs(entry["id"], tuple(arcs_read))
         return out
