@@ -716,6 +716,7 @@ class Engine:
             report = {**empty_report(), "seq": self._seq, "deleted": list(self._dropped)}
             self._state = ReportState(report=report, data=dumps(report))
             self.stats.tracks_confirmed = 0
+            self.stats.last_time = None  # the time line forgotten, in /api/v1/stats too
             self.view.publish(self._state)
             if self._state_store is not None:
                 self._checkpoint = EngineCheckpoint(

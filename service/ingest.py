@@ -418,7 +418,9 @@ class Refusals:
     """Refuses batches: counts each in the stats, publishes its Error report and resolves its
     future. Drops (``overloaded``) are logged at most once a second; refusals at warning level,
     at most one line per reason every :data:`REFUSAL_LOG_INTERVAL` seconds, with the number
-    refused since the previous line (a hostile sender cannot flood the log). Thread-safe."""
+    refused since the previous line (a hostile sender cannot flood the log); that count is
+    logged once the interval is over even if no batch is refused then (a burst of refusals
+    followed by silence was counted only at shutdown). Thread-safe."""
 
     def __init__(self, stats: Stats, out: ReportOut) -> None:
         self.stats = stats
@@ -427,6 +429,7 @@ class Refusals:
         self._unlogged = 0
         self._last_log = -math.inf
         self._refusal_log: dict[str, tuple[float, int]] = {}  # reason → (last line, unlogged)
+        self._timers: dict[str, threading.Timer] = {}  # reason → the timer that logs its count
 
     def refuse(
         self,
@@ -478,6 +481,9 @@ class Refusals:
             n, self._unlogged = self._unlogged, 0
             refused = {r: k for r, (_, k) in self._refusal_log.items() if k}
             self._refusal_log = {r: (last, 0) for r, (last, _) in self._refusal_log.items()}
+            timers, self._timers = list(self._timers.values()), {}
+        for timer in timers:
+            timer.cancel()
         if n:
             log.warning("%d more batch(es) dropped", n)
         for reason, k in sorted(refused.items()):
@@ -504,8 +510,18 @@ class Refusals:
             last, unlogged = self._refusal_log.get(reason, (-math.inf, 0))
             if now - last < REFUSAL_LOG_INTERVAL:
                 self._refusal_log[reason] = (last, unlogged + 1)
+                if reason not in self._timers:
+                    timer = threading.Timer(
+                        last + REFUSAL_LOG_INTERVAL - now, self._log_count, (reason,)
+                    )
+                    timer.daemon = True
+                    self._timers[reason] = timer
+                    timer.start()
                 return
             self._refusal_log[reason] = (now, 0)
+            timer = self._timers.pop(reason, None)
+        if timer is not None:
+            timer.cancel()
         more = f" ({unlogged} more {reason} since the last such line)" if unlogged else ""
         log.warning(
             "batch refused, %s, sensor %s, time %s: %s%s",
@@ -515,6 +531,16 @@ class Refusals:
             _printable(str(report.get("detail")))[:200],
             more,
         )
+
+    def _log_count(self, reason: str) -> None:
+        """The timer's line: the refusals of ``reason`` counted since its last line."""
+        with self._log_lock:
+            self._timers.pop(reason, None)
+            _, unlogged = self._refusal_log.get(reason, (-math.inf, 0))
+            if not unlogged:
+                return
+            self._refusal_log[reason] = (time.monotonic(), 0)
+        log.warning("%d more batch(es) refused, %s", unlogged, reason)
 
     def _log_drop(self, detail: str) -> None:
         with self._log_lock:

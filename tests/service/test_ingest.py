@@ -218,6 +218,30 @@ def test_refusals_are_logged_once_per_reason_and_interval(
     assert len(lines) == 3
 
 
+def test_refusals_counted_in_an_interval_are_logged_when_it_ends(
+    caplog: pytest.LogCaptureFixture, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A burst of refused batches followed by silence: the count of those after the first is
+    logged once the interval is over (a newcomer's trial saw it only at shutdown, 66 s
+    later), and not again at shutdown."""
+    import service.ingest as ingest
+
+    monkeypatch.setattr(ingest, "REFUSAL_LOG_INTERVAL", 0.2)
+    refusals = Refusals(Stats("x"), ReportOut(ListSink()))
+    nan = b'{"sensor_id": "s-1", "time": 3.0, "detections": [{"x": NaN, "y": 0}]}'
+    with caplog.at_level(logging.WARNING, logger="service.ingest"):
+        for _ in range(3):
+            refusals.refuse(nan, None, "invalid_batch", "detections[0].x: not a number")
+        deadline = time.monotonic() + 5.0
+        while len(caplog.records) < 2 and time.monotonic() < deadline:
+            time.sleep(0.02)
+        lines = [r.getMessage() for r in caplog.records]
+        assert lines[0].startswith("batch refused, invalid_batch, sensor s-1")
+        assert lines[1:] == ["2 more batch(es) refused, invalid_batch"]
+        refusals.flush_log()
+    assert len(caplog.records) == 2
+
+
 @pytest.mark.parametrize(
     ("payload", "expected"),
     [

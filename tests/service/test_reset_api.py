@@ -52,6 +52,9 @@ def test_a_recording_sent_again_after_a_reset_is_tracked_again(
         empty = http.get("/api/v1/tracks", params={"status": "all"}).json()
         assert empty["tracks"] == [] and empty["seq"] == 20
         assert sorted(empty["deleted"]) == sorted(confirmed)
+        # the stats forget the time line too (a newcomer's trial saw the last time before)
+        stats = http.get("/api/v1/stats").json()
+        assert stats["last_time"] is None and stats["tracks_confirmed"] == 0
         second = run_batches(service.engine, payloads)
         assert all(r.accepted for r in second), [r for r in second if not r.accepted][:1]
         assert [r.seq for r in second] == list(range(21, 41))
