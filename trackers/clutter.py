@@ -32,7 +32,11 @@ delays the first tracks. The margin and the ceiling keep the cells' prior on the
 where clutter is dense (there the configured density stands, as before). The floor keeps a
 long-quiet area at a 51st of the configured density or more, so that a new false alarm
 there is not a near-certain target.
-A target's detections count too until its track holds three of them, no more.
+A target's detections are counted until its track holds three of them; then the map takes
+its first two back (:meth:`ClutterMap.reclaim`) and holds them with the rest, as below. Before
+that, a target present from a sensor's first scans read as clutter ten to a thousand times the
+scene's in its own cell until it left the cell, and so confirmed late: a parked car in a clean
+scene at the 6th to 10th scan (a 4 s radar, 4 seeds), at the 4th or 5th now.
 
 A radar that reports its turn sector by sector (batches stating a sector of their own as
 ``coverage``, or found to stream sectors without saying so:
@@ -67,12 +71,15 @@ from trackers.association.gating import position_noise
 
 __all__ = [
     "CELL_SIGMAS",
+    "COUNTED_BATCHES",
+    "COUNTED_POINTS",
     "HELD_SCANS",
     "MAX_CELLS",
     "MAX_HELD",
     "MAX_SENSORS",
     "MEMORY_SCANS",
     "PRIOR_SCANS",
+    "RECLAIM_RATE",
     "SCENE_MARGIN",
     "SCENE_PRIOR_SCANS",
     "SCENE_SCANS",
@@ -108,7 +115,7 @@ RESIZE = 4.0
 #: The most sensors with a map (beyond, the least recently heard is forgotten), and the most
 #: cells a sensor's map keeps (beyond, its cells are made twice as wide, their counts
 #: summed): a sender of many sensor ids or of detections strewn over a continent cannot grow
-#: the maps past about MAX_SENSORS x MAX_CELLS x 24 bytes (100 MB).
+#: the maps past about MAX_SENSORS x MAX_CELLS x 32 bytes (134 MB).
 MAX_SENSORS = 256
 MAX_CELLS = 1 << 14
 #: Cell indices are packed into one int64 key: ix · _STRIDE + iy, each within ±_STRIDE/2.
@@ -119,6 +126,20 @@ _STRIDE = 1 << 31
 HELD_SCANS = 300
 #: ... and so is the oldest beyond this many.
 MAX_HELD = 1 << 15
+#: The counted detections of the last COUNTED_BATCHES learned batches (and no more than
+#: COUNTED_POINTS of them) are kept by serial number, for a track that proves a target's to
+#: take its first two back (:meth:`ClutterMap.reclaim`).
+COUNTED_BATCHES = 64
+COUNTED_POINTS = 1 << 16
+#: A detection is taken back only if its cell and the eight around it saw besides the
+#: track's own detections at most this many a scan (decayed count of all the sensor's
+#: detections there over decayed scans): where a track's first two are about all that part
+#: of the map ever saw. Where clutter is dense two counts less change little for one track,
+#: but taken back from every young track there they hollowed the map out (600 false alarms
+#: a scan in a 1.5 km square: 194 confirmed tracks); from a patch of clutter in its first
+#: scans (a cell of it that by chance saw little), tracks confirmed there and then kept the
+#: patch from the map.
+RECLAIM_RATE = 0.05
 
 #: Sectors of a revolution (batches that each looked at an arc of bearings about their
 #: sensor) are gathered until the sweep comes round: a batch whose arc overlaps by more than
@@ -146,6 +167,10 @@ class _Sweep:
 
     gathered: np.ndarray = field(default_factory=lambda: np.zeros(SWEEP_BINS, dtype=bool))
     waiting: list[np.ndarray] = field(default_factory=list)
+    #: the serial numbers of ``waiting``'s detections, one array a batch (−1: none given)
+    serials: list[np.ndarray] = field(default_factory=list)
+    #: all the detections of the batches gathered, one array a batch
+    seen: list[np.ndarray] = field(default_factory=list)
     points: int = 0
     #: the most bins one gathered batch covered
     widest: int = 0
@@ -182,16 +207,90 @@ def arc_bins(start: float, width: float) -> np.ndarray:
 
 
 @dataclass
+class _Counted:
+    """The detections one :meth:`ClutterMap.learn` counted for a sensor: their ``serials``
+    (ascending), positions ``z``, the grid and its scan number they were counted in, and
+    which of them are still counted (``alive``: not taken back)."""
+
+    sensor_id: str
+    grid: _Grid
+    scan: int
+    serials: np.ndarray
+    z: np.ndarray
+    alive: np.ndarray
+
+
+@dataclass
+class _Found:
+    """Where the map holds detection ``serial``, one it counted (``record`` row ``i``) or
+    gathers for a sweep (``sweep`` batch ``batch``): its grid and cell ``key``, the weight
+    it counts with now and how many detections its cell and the eight around it have seen
+    (decayed; those of the sweep's gathered batches included)."""
+
+    serial: int
+    sensor_id: str
+    grid: _Grid
+    key: int
+    weight: float
+    seen: float
+    record: _Counted | None
+    i: int
+    sweep: _Sweep | None
+    batch: int
+
+    def take(self) -> list:
+        """Take it out of its cell (or sweep): the held-back entry it becomes."""
+        grid = self.grid
+        if self.record is not None:
+            rec = self.record
+            rec.alive[self.i] = False
+            x, y = rec.z[self.i].tolist()
+            rows, found = grid.find(np.array([self.key], dtype=np.int64))
+            if found[0]:
+                r = rows[:1]
+                grid.seen[r] = grid.decayed_seen(r)
+                grid.counts[r] = np.maximum(0.0, grid.decayed(r) - self.weight)
+                grid.stamps[r] = grid.scans
+            grid.total = max(0.0, grid.total - self.weight)
+            return [self.sensor_id, x, y, rec.scan, grid, 0]
+        sweep = self.sweep
+        assert sweep is not None
+        i = int(np.flatnonzero(sweep.serials[self.batch] == self.serial)[0])
+        x, y = sweep.waiting[self.batch][i].tolist()
+        sweep.waiting[self.batch] = np.delete(sweep.waiting[self.batch], i, axis=0)
+        sweep.serials[self.batch] = np.delete(sweep.serials[self.batch], i)
+        # (counted, it would have been at the sweep's look, a scan from now)
+        return [self.sensor_id, x, y, grid.scans, grid, 0]
+
+
+def _around(key: int) -> np.ndarray:
+    """The packed keys of cell ``key`` and the eight around it."""
+    return (key + _NEIGHBOURS).astype(np.int64)
+
+
+#: ``ix · _STRIDE + iy`` offsets of a cell's 3 x 3 block
+_NEIGHBOURS = np.array([dx * _STRIDE + dy for dx in (-1, 0, 1) for dy in (-1, 0, 1)])
+
+
+def _block_seen(grid: _Grid, key: int) -> float:
+    """The decayed count of all detections in cell ``key`` and the eight around it now."""
+    rows, found = grid.find(_around(key))
+    return float(grid.decayed_seen(rows[found]).sum())
+
+
+@dataclass
 class _Grid:
     """One sensor's counts: ``keys`` (sorted packed cell indices), ``counts`` decayed to
     scan ``stamps`` (the sensor's scan number when each was last brought up to date),
     ``cell`` the side (m), ``scans`` the sensor's scans counted and ``base`` the side its
-    detections set."""
+    detections set; ``seen`` the cells' decayed counts of all the sensor's detections,
+    targets' included, likewise (what :meth:`ClutterMap.reclaim` asks)."""
 
     cell: float
     keys: np.ndarray
     counts: np.ndarray
     stamps: np.ndarray
+    seen: np.ndarray = field(default_factory=lambda: np.zeros(0))
     scans: int = 0
     #: the side the sensor's detections set (``cell`` grows from it when cells are merged)
     base: float = 0.0
@@ -238,13 +337,21 @@ class _Grid:
         """The counts of rows ``idx`` of the grid brought to now."""
         return self.counts[idx] * _GAMMA ** (self.scans - self.stamps[idx])
 
-    def add(self, keys: np.ndarray, weights: np.ndarray) -> None:
-        """Add ``weights`` (as of now) to the cells of the distinct packed ``keys``, new
-        cells included; too many cells then, and four become one (their counts summed), as
-        often as needed."""
+    def decayed_seen(self, idx: np.ndarray) -> np.ndarray:
+        """The ``seen`` counts of rows ``idx`` brought to now."""
+        return self.seen[idx] * _GAMMA ** (self.scans - self.stamps[idx])
+
+    def add(self, keys: np.ndarray, weights: np.ndarray, seen: np.ndarray | None = None) -> None:
+        """Add ``weights`` (as of now) to the counts of the cells of the distinct packed
+        ``keys`` and ``seen`` (none if not given) to their ``seen``, new cells included;
+        too many cells then, and four become one (their counts summed), as often as
+        needed."""
+        if seen is None:
+            seen = np.zeros(keys.size)
         rows, old = self.find(keys)
         if old.any():
             rows = rows[old]
+            self.seen[rows] = self.decayed_seen(rows) + seen[old]
             self.counts[rows] = self.decayed(rows) + weights[old]
             self.stamps[rows] = self.scans
         new = ~old
@@ -253,6 +360,7 @@ class _Grid:
             order = np.argsort(merged, kind="stable")
             self.keys = merged[order]
             self.counts = np.concatenate([self.counts, weights[new]])[order]
+            self.seen = np.concatenate([self.seen, seen[new]])[order]
             self.stamps = np.concatenate(
                 [self.stamps, np.full(int(new.sum()), self.scans, dtype=np.int64)]
             )[order]
@@ -264,12 +372,14 @@ def _coarsen(grid: _Grid) -> None:
     """The grid with cells twice as wide: each new cell's count is the sum of the four it
     covers, brought to now."""
     counts = grid.decayed(np.arange(grid.keys.size))
+    seen = grid.decayed_seen(np.arange(grid.keys.size))
     iy = _unpack_iy(grid.keys)
     ix = (grid.keys - iy) // _STRIDE
     keys = np.floor_divide(ix, 2) * _STRIDE + np.floor_divide(iy, 2)
     merged, inverse = np.unique(keys, return_inverse=True)
     grid.keys = merged
     grid.counts = np.bincount(inverse, weights=counts, minlength=merged.size)
+    grid.seen = np.bincount(inverse, weights=seen, minlength=merged.size)
     grid.stamps = np.full(merged.size, grid.scans, dtype=np.int64)
     grid.cell *= 2.0
 
@@ -293,6 +403,9 @@ class ClutterMap:
         self._settled = 0
         # each sweeping sensor's sectors since its last look, least recently heard first
         self._sweeps: OrderedDict[str, _Sweep] = OrderedDict()
+        # the detections the last learned batches counted, by serial (oldest first)
+        self._counted: deque[_Counted] = deque()
+        self._counted_points = 0
 
     @staticmethod
     def _cell_side(R: np.ndarray) -> float:
@@ -324,11 +437,20 @@ class ClutterMap:
         lam = (alpha0 + counts) / ((PRIOR_SCANS + grid.exposure()) * area)
         return np.maximum(lam, prior * PRIOR_SCANS / (PRIOR_SCANS + MEMORY_SCANS)), rate
 
-    def learn(self, sensor_id: str, z_clutter: np.ndarray, R: np.ndarray) -> None:
+    def learn(
+        self,
+        sensor_id: str,
+        z_clutter: np.ndarray,
+        R: np.ndarray,
+        serials: np.ndarray | None = None,
+        z_seen: np.ndarray | None = None,
+    ) -> None:
         """Record one processed scan of ``sensor_id``: ``z_clutter`` the detections taken for
         clutter (module docstring), ``R`` the covariances of all of the scan's
         detections (to size a new sensor's cells; a sensor is not counted before it has sent
-        a detection)."""
+        a detection), ``serials`` the tracker's serial numbers of ``z_clutter``'s rows,
+        ascending (−1: none), by which :meth:`reclaim` may take them back, and ``z_seen``
+        all of the scan's detections (``z_clutter`` if not given)."""
         grid = self._grids.get(sensor_id)
         if np.shape(R)[0]:
             side = self._cell_side(np.asarray(R, dtype=float))
@@ -353,19 +475,32 @@ class ClutterMap:
         grid.scans += 1
         grid.total *= _GAMMA
         z = np.asarray(z_clutter, dtype=float).reshape(-1, 2)
-        if z.shape[0] == 0:
-            return
-        grid.total += z.shape[0]
-        lo, hi = z.min(axis=0), z.max(axis=0)
-        grid.boxes.append((float(lo[0]), float(lo[1]), float(hi[0]), float(hi[1])))
-        keys, n = np.unique(grid.cells(z), return_counts=True)
-        grid.add(keys, n.astype(float))  # of scan number ``scans``: they count in full
-        # Cells whose count has decayed to nothing are dropped now and then.
+        seen = z if z_seen is None else np.asarray(z_seen, dtype=float).reshape(-1, 2)
+        if seen.shape[0]:
+            # of scan number ``scans``: they count in full
+            cells = np.concatenate([grid.cells(z), grid.cells(seen)])
+            keys, inverse = np.unique(cells, return_inverse=True)
+            inverse = inverse.ravel()
+            n = keys.size
+            grid.add(
+                keys,
+                np.bincount(inverse[: z.shape[0]], minlength=n).astype(float),
+                np.bincount(inverse[z.shape[0] :], minlength=n).astype(float),
+            )
+        if z.shape[0]:
+            grid.total += z.shape[0]
+            lo, hi = z.min(axis=0), z.max(axis=0)
+            grid.boxes.append((float(lo[0]), float(lo[1]), float(hi[0]), float(hi[1])))
+            if serials is not None:
+                self._remember(sensor_id, grid, z, np.asarray(serials, dtype=np.int64))
+        # Cells whose counts have decayed to nothing are dropped now and then.
         if grid.scans % int(MEMORY_SCANS) == 0 and grid.keys.size:
-            live = grid.decayed(np.arange(grid.keys.size)) > 1e-3
-            grid.keys, grid.counts, grid.stamps = (
+            every = np.arange(grid.keys.size)
+            live = np.maximum(grid.decayed(every), grid.decayed_seen(every)) > 1e-3
+            grid.keys, grid.counts, grid.seen, grid.stamps = (
                 grid.keys[live],
                 grid.counts[live],
+                grid.seen[live],
                 grid.stamps[live],
             )
 
@@ -378,6 +513,8 @@ class ClutterMap:
         R: np.ndarray,
         *,
         swept: bool = False,
+        serials: np.ndarray | None = None,
+        z_seen: np.ndarray | None = None,
     ) -> bool:
         """Record one processed batch of ``sensor_id`` that looked at the arc of bearings
         from ``start`` over ``width`` (rad) about the sensor (a sector of its revolution),
@@ -385,7 +522,8 @@ class ClutterMap:
         the batch's detections, and the sweep passed over the bearings between the previous
         batch's and it too. The sectors are gathered until the sweep comes round
         (:data:`SWEEP_OVERLAP`, :data:`SWEEP_COMPLETE`, :data:`SWEEP_SPAN`,
-        :data:`SWEEP_SHARE`), then learned as one scan. Returns whether that happened now."""
+        :data:`SWEEP_SHARE`), then learned as one scan; ``serials`` and ``z_seen`` as
+        :meth:`learn` takes them. Returns whether that happened now."""
         sweep = self._sweeps.pop(sensor_id, None) or _Sweep()
         self._sweeps[sensor_id] = sweep
         while len(self._sweeps) > MAX_SENSORS:
@@ -409,19 +547,30 @@ class ClutterMap:
             )
             if complete and sweep.R is not None:
                 z = np.concatenate(sweep.waiting) if sweep.waiting else np.zeros((0, 2))
-                self.learn(sensor_id, z, sweep.R)
+                numbers = np.concatenate(sweep.serials) if sweep.serials else np.zeros(0, np.int64)
+                seen = np.concatenate(sweep.seen) if sweep.seen else np.zeros((0, 2))
+                self.learn(sensor_id, z, sweep.R, numbers, seen)
                 learned = True
             sweep.gathered[:] = False
-            sweep.waiting, sweep.points, sweep.widest = [], 0, 0
+            sweep.waiting, sweep.serials, sweep.seen = [], [], []
+            sweep.points, sweep.widest = 0, 0
         z = np.asarray(z_clutter, dtype=float).reshape(-1, 2)
-        if sweep.points + z.shape[0] > SWEEP_MAX_POINTS:  # a sweep that never comes round
+        seen = z if z_seen is None else np.asarray(z_seen, dtype=float).reshape(-1, 2)
+        if sweep.points + seen.shape[0] > SWEEP_MAX_POINTS:  # a sweep that never comes round
             sweep.gathered[:] = False
-            sweep.waiting, sweep.points, sweep.widest = [], 0, 0
+            sweep.waiting, sweep.serials, sweep.seen = [], [], []
+            sweep.points, sweep.widest = 0, 0
         sweep.gathered |= bins
         sweep.last = bins
         sweep.widest = max(sweep.widest, int(np.count_nonzero(bins)))
         sweep.waiting.append(z)
-        sweep.points += z.shape[0]
+        sweep.serials.append(
+            np.full(z.shape[0], -1, dtype=np.int64)
+            if serials is None
+            else np.asarray(serials, dtype=np.int64).reshape(z.shape[0])
+        )
+        sweep.seen.append(seen)
+        sweep.points += seen.shape[0]
         if np.shape(R)[0]:
             sweep.R = np.asarray(R, dtype=float)[:256].copy()  # (its noise sizes the cells)
         return learned
@@ -451,9 +600,118 @@ class ClutterMap:
                 held[serial] = entry = [sensor_id, x, y, grid.scans, grid, 0]
             entry[5] += 1
             holding.setdefault(holder, []).append(serial)
+        self._trim_held()
+
+    def _trim_held(self) -> None:
+        held = self._held
         if len(held) > MAX_HELD:  # the oldest quarter goes at once (amortized O(1))
             self._held = dict(list(held.items())[len(held) - 3 * MAX_HELD // 4 :])
             self._prune_holding()
+
+    def reclaim(self, serials: np.ndarray, holders: Sequence[str]) -> None:
+        """Take back detections of earlier scans that the map counted (or gathers for a
+        sweep) and hold them for the tracks ``holders`` (one a serial; a track's serials come
+        together) as :meth:`hold` does, their cells less their weight ``γ^age``: the first
+        two of a track that took its third (module docstring). Only where they are about all
+        their cells saw: the detections their cell and the eight around it saw besides the
+        track's (its third included, if there) are at most :data:`RECLAIM_RATE` a scan. A
+        serial the map no longer knows
+        (never counted, too old, its sensor's map started afresh) is passed over; one
+        already held gains a holder."""
+        held, holding = self._held, self._holding
+        numbers = np.asarray(serials).tolist()
+        by_holder: dict[str, list[int]] = {}
+        for serial, holder in zip(numbers, holders, strict=True):
+            if serial >= 0:
+                by_holder.setdefault(holder, []).append(serial)
+        for holder, own in by_holder.items():
+            found = [(s, self._find(s)) for s in own if s not in held]
+            found = [(s, f) for s, f in found if f is not None]
+            for s, f in found:
+                # the track's own in the block (the third too, perhaps)
+                mine = 1.0 + sum(
+                    g.weight for _, g in found if g.grid is f.grid and g.key in _around(f.key)
+                )
+                if f.seen - mine <= RECLAIM_RATE * f.grid.exposure():
+                    held[s] = f.take()
+            for s in own:
+                entry = held.get(s)
+                if entry is not None:
+                    entry[5] += 1
+                    holding.setdefault(holder, []).append(s)
+        self._trim_held()
+
+    def _find(self, serial: int) -> _Found | None:
+        """Where the map counted (or gathers) detection ``serial``; ``None`` if it does not
+        know it (any more)."""
+        for rec in reversed(self._counted):
+            if not rec.serials.size or not rec.serials[0] <= serial <= rec.serials[-1]:
+                continue
+            i = int(np.searchsorted(rec.serials, serial))
+            if i >= rec.serials.size or rec.serials[i] != serial:
+                continue  # (a sweep's serials span other sensors' batches)
+            grid = self._grids.get(rec.sensor_id)
+            if not rec.alive[i] or grid is not rec.grid:
+                return None
+            key = int(grid.cells(rec.z[i : i + 1])[0])
+            return _Found(
+                serial,
+                rec.sensor_id,
+                grid,
+                key,
+                _GAMMA ** (grid.scans - rec.scan),
+                _block_seen(grid, key),
+                rec,
+                i,
+                None,
+                -1,
+            )
+        for sensor_id, sweep in self._sweeps.items():
+            for b, numbers in enumerate(sweep.serials):
+                hit = np.flatnonzero(numbers == serial)
+                grid = self._grids.get(sensor_id)
+                if not hit.size or grid is None:
+                    continue
+                i = int(hit[0])
+                key = int(grid.cells(sweep.waiting[b][i : i + 1])[0])
+                block = _around(key)
+                waiting = sum(
+                    int(np.isin(grid.cells(w), block).sum()) for w in sweep.seen if len(w)
+                )
+                return _Found(
+                    serial,
+                    sensor_id,
+                    grid,
+                    key,
+                    1.0,
+                    _block_seen(grid, key) + waiting,
+                    None,
+                    i,
+                    sweep,
+                    b,
+                )
+        return None
+
+    def _remember(self, sensor_id: str, grid: _Grid, z: np.ndarray, serials: np.ndarray) -> None:
+        """Keep the serials of the detections just counted (:data:`COUNTED_BATCHES`)."""
+        known = serials >= 0
+        if not known.any():
+            return
+        order = np.argsort(serials[known], kind="stable")
+        numbers = serials[known][order]
+        self._counted.append(
+            _Counted(
+                sensor_id=sensor_id,
+                grid=grid,
+                scan=grid.scans,
+                serials=numbers,
+                z=z[known][order],
+                alive=np.ones(numbers.size, dtype=bool),
+            )
+        )
+        self._counted_points += numbers.size
+        while len(self._counted) > COUNTED_BATCHES or self._counted_points > COUNTED_POINTS:
+            self._counted_points -= self._counted.popleft().serials.size
 
     def settle(self, accepted: Sequence[str], rejected: Sequence[str]) -> None:
         """The fates of tracks that held detections back: ``accepted`` (confirmed, continuing
@@ -501,8 +759,13 @@ class ClutterMap:
 
     def forget_held(self) -> None:
         """Drop every held-back detection (the tracks that held them are gone: a state
-        restored)."""
+        restored), and the serials of the counted ones (a restored tracker numbers
+        detections afresh)."""
         self._held, self._holding = {}, {}
+        self._counted.clear()
+        self._counted_points = 0
+        for sweep in self._sweeps.values():
+            sweep.serials = [np.full(len(z), -1, dtype=np.int64) for z in sweep.waiting]
 
     def _drop_stale(self) -> None:
         """Forget held-back detections older than :data:`HELD_SCANS` of their sensor's

@@ -156,7 +156,8 @@ class TrackArrays(RowArrays):
     :data:`~trackers.initiation.MIN_PAIR_INTERVAL` after the track's previous one adds
     none); ``took`` is the serial number of the last detection it took (the tracker numbers
     every detection it is given, batch after batch; −1: none), what tells its siblings
-    (:func:`_siblings_sharing`).
+    (:func:`_siblings_sharing`), ``first`` that of its first detection (−1: unknown; what
+    the clutter map takes back at its third, :meth:`~trackers.clutter.ClutterMap.reclaim`).
     ``origin`` numbers the detection a track started from: tracks of one origin are rival
     hypotheses of one target's start, of which only the likeliest is kept once each has
     been tested against a scan. ``looked`` is the last time a scan looked at the track (had
@@ -179,6 +180,7 @@ class TrackArrays(RowArrays):
     detection_ids: np.ndarray
     origin: np.ndarray
     took: np.ndarray
+    first: np.ndarray
     looked: np.ndarray
 
     @staticmethod
@@ -200,6 +202,7 @@ class TrackArrays(RowArrays):
             updated=np.zeros(0),
             detection_ids=np.zeros(0, dtype=object),
             took=np.zeros(0, dtype=np.int64),
+            first=np.zeros(0, dtype=np.int64),
             origin=np.zeros(0, dtype=np.int64),
             looked=np.zeros(0),
         )
@@ -723,6 +726,7 @@ class IndividualTracker:
             held=held,
             accepted=accepted,
             rejected=rejected,
+            first_serial=serial,
         )
 
     def _update_existing(
@@ -843,8 +847,18 @@ class IndividualTracker:
         hold = np.flatnonzero(
             (hits[at] >= ESTABLISHED_HITS) & ~tracks.confirmed[at] & (claims[ad] < np.inf)
         )
+        # A track that took its third detection now is a target's whatever its status: its
+        # first two, which the map counted when it had fewer, are taken back to be held too.
+        assert ESTABLISHED_HITS == 3  # (a track knows the serials of its first and last only)
+        third = at[(hits[at] == ESTABLISHED_HITS) & (tracks.hits[at] == ESTABLISHED_HITS - 1)]
+        third = third[~tracks.confirmed[third]]
+        earlier = np.stack([tracks.first[third], tracks.took[third]], axis=1)
         held = HeldDetections(
-            rows=ad[hold], holders=tuple(tracks.ids[at[hold]].tolist()), serials=serial + ad[hold]
+            rows=ad[hold],
+            holders=tuple(tracks.ids[at[hold]].tolist()),
+            serials=serial + ad[hold],
+            earlier=earlier.ravel(),
+            earlier_holders=tuple(np.repeat(tracks.ids[third], 2).tolist()),
         )
         new = replace(
             tracks,
@@ -940,6 +954,7 @@ class IndividualTracker:
             hits=2,
             created=cand.time[two.candidate],
             origin=cand.origin[two.candidate],
+            first=cand.serial[two.candidate],
         )
         # The candidates go on as their missed branches while their score stays above T_d
         # (missed with probability P_D times the share of their target's reach in view);
@@ -968,6 +983,7 @@ class IndividualTracker:
                 [cand.group_velocity.take(keep, axis=0), _group_velocities(z_new, tracks, init)]
             ),
             offered=np.concatenate([offered.take(keep), np.zeros(n, dtype=np.int64)]),
+            serial=np.concatenate([cand.serial.take(keep), counters.serial + idx]),
         )
         return born, candidates
 
@@ -1106,9 +1122,10 @@ _TRACK_NUMBERS = (
     "updated",
     "origin",
     "took",
+    "first",
     "looked",
 )
-_CANDIDATE_NUMBERS = ("z", "R", "time", "score", "origin")
+_CANDIDATE_NUMBERS = ("z", "R", "time", "score", "origin", "serial")
 
 
 def _read_group_velocities(r: SectionReader, k: int) -> np.ndarray:
@@ -1152,6 +1169,10 @@ def _import(section: StateSection, config: TrackerConfig, id_prefix: str = "") -
     took = r.integers("tracks.took", (n,), ge=-1) if r.has("tracks.took") else None
     if took is None or "next_serial" not in r.values:  # a file from before siblings
         took = np.full(n, -1, dtype=np.int64)
+    # a file from before the clutter map took a track's first detections back: unknown
+    first = r.integers("tracks.first", (n,), ge=-1) if r.has("tracks.first") else None
+    if first is None or "next_serial" not in r.values:
+        first = np.full(n, -1, dtype=np.int64)
     updated = r.floats("tracks.updated", (n,))
     tracks = TrackArrays(
         ids=_objects(ids),
@@ -1174,6 +1195,7 @@ def _import(section: StateSection, config: TrackerConfig, id_prefix: str = "") -
         detection_ids=_objects(r.string_groups("tracks.detection_ids", n)),
         origin=r.integers("tracks.origin", (n,), ge=0),
         took=took,
+        first=first,
         # a file from before: looked at when last updated
         looked=r.floats("tracks.looked", (n,)) if r.has("tracks.looked") else updated.copy(),
     )
@@ -1190,7 +1212,14 @@ def _import(section: StateSection, config: TrackerConfig, id_prefix: str = "") -
             if r.has("candidates.offered")
             else np.zeros(k, dtype=np.int64)  # a file from before coverage
         ),
+        serial=(
+            r.integers("candidates.serial", (k,), ge=-1)
+            if r.has("candidates.serial")
+            else np.full(k, -1, dtype=np.int64)  # a file from before: unknown
+        ),
     )
+    if "next_serial" not in r.values:  # (serials of a tracker that numbered none)
+        candidates = replace(candidates, serial=np.full(k, -1, dtype=np.int64))
     r.finish()
 
     def bad(detail: str) -> StateError:
@@ -1213,7 +1242,7 @@ def _import(section: StateSection, config: TrackerConfig, id_prefix: str = "") -
             raise bad("mode probabilities must be in [0, 1] and sum to 1")
         if (tracks.peak < tracks.score).any():
             raise bad("a track's peak score is below its score")
-        if (tracks.took >= next_serial).any():
+        if (tracks.took >= next_serial).any() or (tracks.first >= next_serial).any():
             raise bad(f"next_serial {next_serial} is not above every detection a track took")
         if (tracks.instants > tracks.hits).any() or (
             tracks.instants < np.minimum(tracks.hits, 1)
@@ -1225,6 +1254,8 @@ def _import(section: StateSection, config: TrackerConfig, id_prefix: str = "") -
         assert t is not None
         if (candidates.time > t).any():
             raise bad("a candidate is later than the last scan")
+        if (candidates.serial >= next_serial).any():
+            raise bad(f"next_serial {next_serial} is not above every candidate's detection")
         R = candidates.R
         if not _covariances_ok(R) or (R[:, 0, 0] * R[:, 1, 1] - R[:, 0, 1] ** 2 <= 0).any():
             raise bad("a candidate covariance is not symmetric positive definite")
@@ -1321,10 +1352,12 @@ def _new_tracks(
     hits: int,
     created: np.ndarray,
     origin: np.ndarray,
+    first: np.ndarray | None = None,
 ) -> TrackArrays:
     """Tentative tracks at this scan from states ``x (n, 4)`` over ``[x, y, vx, vy]``
     with covariances ``P (n, 4, 4)``, each mode starting from that state with turn rate 0
-    of std ``turn_rate_std``; ``detections`` index the scan's detections they hold."""
+    of std ``turn_rate_std``; ``detections`` index the scan's detections they hold (the
+    last of them; ``first`` the serials of their first, when that is another)."""
     M = len(config.motion.models)
     n = detections.size
     if n == 0:
@@ -1352,7 +1385,8 @@ def _new_tracks(
         updated=np.full(n, float(scan.time)),
         detection_ids=det_ids,
         origin=np.asarray(origin, dtype=np.int64),
-        took=counters.serial + np.asarray(detections, dtype=np.int64),
+        took=(took := counters.serial + np.asarray(detections, dtype=np.int64)),
+        first=took.copy() if first is None else np.asarray(first, dtype=np.int64),
         looked=np.full(n, float(scan.time)),
     )
 
@@ -1433,6 +1467,7 @@ def _adopted(
         detection_ids=_objects([()] * n),
         origin=counters.origins(n),
         took=np.full(n, -1, dtype=np.int64),
+        first=np.full(n, -1, dtype=np.int64),
         looked=np.array([st.time for st in states], dtype=float),  # the peer's view of it
     )
 

@@ -99,7 +99,9 @@ class Candidates(RowArrays):
     ``detection_ids (n,)`` (objects), ``origin (n,)``, a number unique to each candidate
     that the tracks it starts inherit, ``group_velocity (n, 2)``, the velocity of the
     fast confirmed track nearest to it when it opened (NaN: none within reach), and
-    ``offered (n,)``, the scans that have looked at it since (0: it is at its first)."""
+    ``offered (n,)``, the scans that have looked at it since (0: it is at its first), and
+    ``serial (n,)``, the tracker's serial number of its detection (−1: unknown), what the
+    clutter map counted it under."""
 
     z: np.ndarray
     R: np.ndarray
@@ -109,6 +111,7 @@ class Candidates(RowArrays):
     origin: np.ndarray
     group_velocity: np.ndarray
     offered: np.ndarray
+    serial: np.ndarray
 
     @staticmethod
     def empty() -> Candidates:
@@ -121,6 +124,7 @@ class Candidates(RowArrays):
             origin=np.zeros(0, dtype=np.int64),
             group_velocity=np.zeros((0, 2)),
             offered=np.zeros(0, dtype=np.int64),
+            serial=np.zeros(0, dtype=np.int64),
         )
 
 

@@ -345,11 +345,16 @@ class HeldDetections:
     """Detections of a scan that tentative tracks hold back from the clutter map until their
     fate is known (:mod:`trackers.clutter`): ``rows`` of the point tracker's scan, the id of
     the track holding each (``holders``) and each detection's ``serials`` (unique across
-    scans; a detection two tracks took comes twice, with one serial)."""
+    scans; a detection two tracks took comes twice, with one serial). ``earlier`` are the
+    serials of detections of earlier scans that the map counted and now takes back to hold
+    them too, for the tracks ``earlier_holders`` (one a serial): the first two of a track
+    that took its third (:meth:`~trackers.clutter.ClutterMap.reclaim`)."""
 
     rows: np.ndarray
     holders: tuple[str, ...]
     serials: np.ndarray
+    earlier: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
+    earlier_holders: tuple[str, ...] = ()
 
     @staticmethod
     def none() -> HeldDetections:
@@ -363,8 +368,9 @@ class PointProposal:
     ``clutter``, when the tracker says, marks the scan's detections that no confirmed track
     took or had in its gate and no track of three or more detections took (what the
     pipeline's clutter map counts); ``held`` are those of the last kind that tentative tracks
-    took, and ``accepted`` and ``rejected`` the ids of the tracks whose held detections are
-    now known to be a target's (or another reading's of one) or false alarms."""
+    took (and earlier ones of theirs), and ``accepted`` and ``rejected`` the ids of the
+    tracks whose held detections are now known to be a target's (or another reading's of
+    one) or false alarms."""
 
     result: StepResult
     released: tuple[PointTrackState, ...]
@@ -373,6 +379,9 @@ class PointProposal:
     held: HeldDetections = field(default_factory=HeldDetections.none)
     accepted: tuple[str, ...] = ()
     rejected: tuple[str, ...] = ()
+    #: the serial number the tracker gave the scan's first detection (its others follow in
+    #: order; −1: it numbers none), what ``held`` and the map know detections by
+    first_serial: int = -1
 
 
 class PointTracker(Protocol):

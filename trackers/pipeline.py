@@ -415,19 +415,33 @@ class TrackingPipeline:
                 arc = self._coverage.last_arc(scan.sensor_id)  # this batch's, just learned
                 swept = True
         sector = arc is not None
+        held = point.held
         if mapped and (sector or (whole and scan.size)) and self._map_disc(scan):
             mask = point.clutter
-            clutter = rows if mask is None else rows[np.asarray(mask, dtype=bool)]
+            picked = (
+                np.arange(rows.size) if mask is None else np.flatnonzero(np.asarray(mask, bool))
+            )
+            clutter = rows.take(picked)
+            serials = None if point.first_serial < 0 else point.first_serial + picked
             if arc is not None:
                 self._clutter.learn_sector(
-                    scan.sensor_id, *arc, scan.z.take(clutter, axis=0), scan.R, swept=swept
+                    scan.sensor_id,
+                    *arc,
+                    scan.z.take(clutter, axis=0),
+                    scan.R,
+                    swept=swept,
+                    serials=serials,
+                    z_seen=scan.z,
                 )
             else:
-                self._clutter.learn(scan.sensor_id, scan.z.take(clutter, axis=0), scan.R)
-            held = point.held
+                self._clutter.learn(
+                    scan.sensor_id, scan.z.take(clutter, axis=0), scan.R, serials, scan.z
+                )
             if held.rows.size:
                 z = scan.z.take(rows.take(held.rows), axis=0)
                 self._clutter.hold(scan.sensor_id, z, held.holders, held.serials)
+        if held.earlier.size:  # (counted at scans of their own, perhaps of other sensors)
+            self._clutter.reclaim(held.earlier, held.earlier_holders)
         if point.accepted or point.rejected:
             self._clutter.settle(point.accepted, point.rejected)
 

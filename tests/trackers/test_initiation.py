@@ -33,6 +33,7 @@ def candidates_at(z, variance=100.0):
         origin=np.arange(n),
         group_velocity=np.full((n, 2), np.nan),
         offered=np.zeros(n, dtype=np.int64),
+        serial=np.arange(n),
     )
 
 
@@ -427,6 +428,7 @@ def test_small_problems_score_every_pair_with_the_same_result_as_the_search(
             origin=np.arange(n_c),
             group_velocity=np.full((n_c, 2), np.nan),
             offered=np.zeros(n_c, dtype=np.int64),
+            serial=np.arange(n_c),
         )
         z = rng.uniform(-span, span, (n_z, 2))
         near = rng.integers(0, n_c, n_z // 2)

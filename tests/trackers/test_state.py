@@ -109,12 +109,13 @@ def test_tracks_of_an_older_file_count_an_instant_a_detection_and_have_no_siblin
     state = PipelineState(
         state.last_time, state.point_kind, StateSection(values, state.point.arrays), state.peers
     )
-    older = _without(state, "tracks.instants", "tracks.took")
+    older = _without(state, "tracks.instants", "tracks.took", "tracks.first", "candidates.serial")
     q = TrackingPipeline(TrackerConfig())
     q.import_state(older)
     tracks = q.point.tracks  # type: ignore[attr-defined]
     assert len(tracks) and (tracks.instants == tracks.hits).all()
-    assert (tracks.took == -1).all()
+    assert (tracks.took == -1).all() and (tracks.first == -1).all()
+    assert (q.point.candidates.serial == -1).all()  # type: ignore[attr-defined]
     assert tracks_of(q) == tracks_of(p)
     # a file of the first version with instants: its took were rows of the last batch, and
     # it had no serial counter; they are not read as serials
@@ -172,6 +173,8 @@ def test_a_restored_pipeline_of_radars_reporting_together_goes_on_exactly(at: in
     b = restarted(a)
     tracks = a.point.tracks  # type: ignore[attr-defined]
     assert (tracks.instants < tracks.hits).any() and (tracks.took >= 0).any()
+    np.testing.assert_array_equal(b.point.tracks.first, tracks.first)  # type: ignore[attr-defined]
+    assert (tracks.first >= 0).any()
     for s in scans[at:]:
         ra, rb = a.process(s), b.process(s)
         assert rb.deleted == ra.deleted
