@@ -33,10 +33,15 @@ where clutter is dense (there the configured density stands, as before). The flo
 long-quiet area at a 51st of the configured density or more, so that a new false alarm
 there is not a near-certain target.
 A target's detections are counted until its track holds three of them; then the map takes
-its first two back (:meth:`ClutterMap.reclaim`) and holds them with the rest, as below. Before
-that, a target present from a sensor's first scans read as clutter ten to a thousand times the
-scene's in its own cell until it left the cell, and so confirmed late: a parked car in a clean
-scene at the 6th to 10th scan (a 4 s radar, 4 seeds), at the 4th or 5th now.
+its first two back (:meth:`ClutterMap.reclaim`) and holds them with the rest, as below, where
+they are about all that their cell and the eight around it have seen: at most
+:data:`RECLAIM_RATE` other detections a look (the track's third is its own too). It knows
+the detections of the last :data:`COUNTED_BATCHES` batches it learned from (all sensors'
+together, no more than :data:`COUNTED_POINTS` detections) and those its sweeps gather; a
+track's first detection counted before that is left counted. Before, a slow target present
+from a sensor's first scans read as clutter ten to a thousand times the scene's in its own
+cell until it left the cell, and so confirmed late: in a clean scene, parked to 15 m/s,
+at the 5th to 10th scan of a 4 s radar (4 seeds, a mean of 6.3), the 4th to 6th now (5.0).
 
 A radar that reports its turn sector by sector (batches stating a sector of their own as
 ``coverage``, or found to stream sectors without saying so:
@@ -61,6 +66,8 @@ was started afresh, and the oldest beyond :data:`MAX_HELD`.
 
 from __future__ import annotations
 
+import bisect
+import itertools
 from collections import OrderedDict, deque
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -129,7 +136,7 @@ MAX_HELD = 1 << 15
 #: The counted detections of the last COUNTED_BATCHES learned batches (and no more than
 #: COUNTED_POINTS of them) are kept by serial number, for a track that proves a target's to
 #: take its first two back (:meth:`ClutterMap.reclaim`).
-COUNTED_BATCHES = 64
+COUNTED_BATCHES = 1024
 COUNTED_POINTS = 1 << 16
 #: A detection is taken back only if its cell and the eight around it saw besides the
 #: track's own detections at most this many a scan (decayed count of all the sensor's
@@ -157,6 +164,7 @@ SWEEP_SHARE = 0.4
 SWEEP_MAX_POINTS = 1 << 14
 
 _GAMMA = 1.0 - 1.0 / MEMORY_SCANS
+_GRID_NUMBERS = itertools.count()
 
 
 @dataclass
@@ -169,8 +177,15 @@ class _Sweep:
     waiting: list[np.ndarray] = field(default_factory=list)
     #: the serial numbers of ``waiting``'s detections, one array a batch (−1: none given)
     serials: list[np.ndarray] = field(default_factory=list)
-    #: all the detections of the batches gathered, one array a batch
+    #: all the detections of the batches gathered, one array a batch, each of them standing
+    #: for ``seen_weight`` of its batch's (1, or more once thinned: at most
+    #: SWEEP_MAX_POINTS are kept)
     seen: list[np.ndarray] = field(default_factory=list)
+    seen_weight: list[float] = field(default_factory=list)
+    seen_points: int = 0
+    #: the first serial of each batch of ``waiting`` that has any (ascending) and the batch
+    firsts: list[int] = field(default_factory=list)
+    batches: list[int] = field(default_factory=list)
     points: int = 0
     #: the most bins one gathered batch covered
     widest: int = 0
@@ -179,6 +194,44 @@ class _Sweep:
     #: the previous batch's bins, and the arc of its detections (``swept`` batches)
     last: np.ndarray = field(default_factory=lambda: np.zeros(SWEEP_BINS, dtype=bool))
     arc: tuple[float, float] | None = None
+
+    def restart(self) -> None:
+        """Gather afresh (a look learned, or a sweep that never came round)."""
+        self.gathered[:] = False
+        self.waiting, self.serials, self.firsts, self.batches = [], [], [], []
+        self.seen, self.seen_weight, self.seen_points = [], [], 0
+        self.points, self.widest = 0, 0
+
+    def add_seen(self, z: np.ndarray) -> None:
+        """Gather a batch's detections; beyond SWEEP_MAX_POINTS every other one of those
+        gathered is kept, standing for twice as many."""
+        self.seen.append(z)
+        self.seen_weight.append(1.0)
+        self.seen_points += z.shape[0]
+        while self.seen_points > SWEEP_MAX_POINTS:
+            self.seen = [w[::2] for w in self.seen]
+            self.seen_weight = [2.0 * w for w in self.seen_weight]
+            self.seen_points = sum(len(w) for w in self.seen)
+
+    def seen_in(self, grid: _Grid, block: np.ndarray) -> float:
+        """How many of the detections gathered lie in the cells ``block`` of ``grid``."""
+        return sum(
+            w * int(np.isin(grid.cells(z), block).sum())
+            for z, w in zip(self.seen, self.seen_weight, strict=True)
+            if len(z)
+        )
+
+    def find(self, serial: int) -> tuple[int, int] | None:
+        """The batch and row of waiting detection ``serial``, or ``None``."""
+        k = bisect.bisect_right(self.firsts, serial) - 1
+        if k < 0:
+            return None
+        b = self.batches[k]
+        numbers = self.serials[b]
+        i = int(np.searchsorted(numbers, serial))
+        if i < numbers.size and numbers[i] == serial:
+            return b, i
+        return None
 
 
 def _swept(before: tuple[float, float], now: tuple[float, float]) -> tuple[float, float]:
@@ -209,11 +262,12 @@ def arc_bins(start: float, width: float) -> np.ndarray:
 @dataclass
 class _Counted:
     """The detections one :meth:`ClutterMap.learn` counted for a sensor: their ``serials``
-    (ascending), positions ``z``, the grid and its scan number they were counted in, and
-    which of them are still counted (``alive``: not taken back)."""
+    (ascending), positions ``z``, the number of the grid (:attr:`_Grid.number`; the grid
+    itself is not kept: a forgotten one is let go) and its scan number they were counted in,
+    and which of them are still counted (``alive``: not taken back)."""
 
     sensor_id: str
-    grid: _Grid
+    grid: int
     scan: int
     serials: np.ndarray
     z: np.ndarray
@@ -291,6 +345,8 @@ class _Grid:
     counts: np.ndarray
     stamps: np.ndarray
     seen: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    #: a number no other grid of the map's process has
+    number: int = field(default_factory=lambda: next(_GRID_NUMBERS))
     scans: int = 0
     #: the side the sensor's detections set (``cell`` grows from it when cells are merged)
     base: float = 0.0
@@ -403,9 +459,11 @@ class ClutterMap:
         self._settled = 0
         # each sweeping sensor's sectors since its last look, least recently heard first
         self._sweeps: OrderedDict[str, _Sweep] = OrderedDict()
-        # the detections the last learned batches counted, by serial (oldest first)
+        # the detections the last learned batches counted (oldest first), and each one's
+        # batch and row by serial
         self._counted: deque[_Counted] = deque()
         self._counted_points = 0
+        self._by_serial: dict[int, tuple[_Counted, int]] = {}
 
     @staticmethod
     def _cell_side(R: np.ndarray) -> float:
@@ -444,13 +502,15 @@ class ClutterMap:
         R: np.ndarray,
         serials: np.ndarray | None = None,
         z_seen: np.ndarray | None = None,
+        seen_weights: np.ndarray | None = None,
     ) -> None:
         """Record one processed scan of ``sensor_id``: ``z_clutter`` the detections taken for
         clutter (module docstring), ``R`` the covariances of all of the scan's
         detections (to size a new sensor's cells; a sensor is not counted before it has sent
         a detection), ``serials`` the tracker's serial numbers of ``z_clutter``'s rows,
         ascending (−1: none), by which :meth:`reclaim` may take them back, and ``z_seen``
-        all of the scan's detections (``z_clutter`` if not given)."""
+        all of the scan's detections (``z_clutter`` if not given), each standing for
+        ``seen_weights`` of them (1 if not given)."""
         grid = self._grids.get(sensor_id)
         if np.shape(R)[0]:
             side = self._cell_side(np.asarray(R, dtype=float))
@@ -485,7 +545,7 @@ class ClutterMap:
             grid.add(
                 keys,
                 np.bincount(inverse[: z.shape[0]], minlength=n).astype(float),
-                np.bincount(inverse[z.shape[0] :], minlength=n).astype(float),
+                np.bincount(inverse[z.shape[0] :], weights=seen_weights, minlength=n).astype(float),
             )
         if z.shape[0]:
             grid.total += z.shape[0]
@@ -549,28 +609,31 @@ class ClutterMap:
                 z = np.concatenate(sweep.waiting) if sweep.waiting else np.zeros((0, 2))
                 numbers = np.concatenate(sweep.serials) if sweep.serials else np.zeros(0, np.int64)
                 seen = np.concatenate(sweep.seen) if sweep.seen else np.zeros((0, 2))
-                self.learn(sensor_id, z, sweep.R, numbers, seen)
+                weights = np.repeat(sweep.seen_weight, [len(w) for w in sweep.seen])
+                self.learn(sensor_id, z, sweep.R, numbers, seen, weights)
                 learned = True
-            sweep.gathered[:] = False
-            sweep.waiting, sweep.serials, sweep.seen = [], [], []
-            sweep.points, sweep.widest = 0, 0
+            sweep.restart()
         z = np.asarray(z_clutter, dtype=float).reshape(-1, 2)
         seen = z if z_seen is None else np.asarray(z_seen, dtype=float).reshape(-1, 2)
-        if sweep.points + seen.shape[0] > SWEEP_MAX_POINTS:  # a sweep that never comes round
-            sweep.gathered[:] = False
-            sweep.waiting, sweep.serials, sweep.seen = [], [], []
-            sweep.points, sweep.widest = 0, 0
+        if sweep.points + z.shape[0] > SWEEP_MAX_POINTS:  # a sweep that never comes round
+            sweep.restart()
         sweep.gathered |= bins
         sweep.last = bins
         sweep.widest = max(sweep.widest, int(np.count_nonzero(bins)))
-        sweep.waiting.append(z)
-        sweep.serials.append(
+        numbers = (
             np.full(z.shape[0], -1, dtype=np.int64)
             if serials is None
             else np.asarray(serials, dtype=np.int64).reshape(z.shape[0])
         )
-        sweep.seen.append(seen)
-        sweep.points += seen.shape[0]
+        if z.shape[0]:  # (a heartbeat adds nothing to the lists)
+            if (numbers >= 0).any():
+                sweep.firsts.append(int(numbers[numbers >= 0].min()))
+                sweep.batches.append(len(sweep.waiting))
+            sweep.waiting.append(z)
+            sweep.serials.append(numbers)
+            sweep.points += z.shape[0]
+        if seen.shape[0]:
+            sweep.add_seen(seen)
         if np.shape(R)[0]:
             sweep.R = np.asarray(R, dtype=float)[:256].copy()  # (its noise sizes the cells)
         return learned
@@ -608,31 +671,57 @@ class ClutterMap:
             self._held = dict(list(held.items())[len(held) - 3 * MAX_HELD // 4 :])
             self._prune_holding()
 
-    def reclaim(self, serials: np.ndarray, holders: Sequence[str]) -> None:
+    def reclaim(
+        self,
+        serials: np.ndarray,
+        holders: Sequence[str],
+        thirds: tuple[str, np.ndarray, bool] | None = None,
+    ) -> None:
         """Take back detections of earlier scans that the map counted (or gathers for a
         sweep) and hold them for the tracks ``holders`` (one a serial; a track's serials come
         together) as :meth:`hold` does, their cells less their weight ``γ^age``: the first
         two of a track that took its third (module docstring). Only where they are about all
         their cells saw: the detections their cell and the eight around it saw besides the
-        track's (its third included, if there) are at most :data:`RECLAIM_RATE` a scan. A
-        serial the map no longer knows
-        (never counted, too old, its sensor's map started afresh) is passed over; one
-        already held gains a holder."""
+        track's own are at most :data:`RECLAIM_RATE` a look (:meth:`_Grid.exposure`).
+        ``thirds`` says where the tracks' thirds lie, which the scan just seen added there:
+        the sensor, their positions (one a serial) and whether its sweep gathered them
+        rather than the map learned them; ``None``: the scan was not counted. A serial the
+        map no longer knows (never counted, too old, its sensor's map started afresh) is
+        passed over; one already held gains a holder."""
         held, holding = self._held, self._holding
         numbers = np.asarray(serials).tolist()
         by_holder: dict[str, list[int]] = {}
-        for serial, holder in zip(numbers, holders, strict=True):
-            if serial >= 0:
-                by_holder.setdefault(holder, []).append(serial)
+        third_of: dict[str, np.ndarray] = {}
+        for k, (serial, holder) in enumerate(zip(numbers, holders, strict=True)):
+            if serial >= 0 and serial not in by_holder.setdefault(holder, []):
+                by_holder[holder].append(serial)
+            if thirds is not None:
+                third_of[holder] = thirds[1][k]
         for holder, own in by_holder.items():
             found = [(s, self._find(s)) for s in own if s not in held]
             found = [(s, f) for s, f in found if f is not None]
+            # where the track's own detections lie, with their weights now: those found, those
+            # a sibling holds already, and its third (in the cells it was counted in)
+            mine = [(f.sensor_id, f.grid, f.key, f.weight, f.sweep is not None) for _, f in found]
+            for s in own:
+                e = held.get(s)
+                grid = None if e is None else self._grids.get(e[0])
+                if grid is not None and grid is e[4]:
+                    key = int(grid.cells(np.array([e[1:3]]))[0])
+                    mine.append((e[0], grid, key, _GAMMA ** (grid.scans - e[3]), False))
+            if thirds is not None and holder in third_of:
+                grid = self._grids.get(thirds[0])
+                if grid is not None:
+                    key = int(grid.cells(third_of[holder][None])[0])
+                    mine.append((thirds[0], grid, key, 1.0, thirds[2]))
             for s, f in found:
-                # the track's own in the block (the third too, perhaps)
-                mine = 1.0 + sum(
-                    g.weight for _, g in found if g.grid is f.grid and g.key in _around(f.key)
+                block = _around(f.key)
+                own_here = sum(
+                    w
+                    for sensor, grid, key, w, waiting in mine
+                    if grid is f.grid and key in block and (not waiting or f.sweep is not None)
                 )
-                if f.seen - mine <= RECLAIM_RATE * f.grid.exposure():
+                if f.seen - own_here <= RECLAIM_RATE * f.grid.exposure():
                     held[s] = f.take()
             for s in own:
                 entry = held.get(s)
@@ -644,14 +733,11 @@ class ClutterMap:
     def _find(self, serial: int) -> _Found | None:
         """Where the map counted (or gathers) detection ``serial``; ``None`` if it does not
         know it (any more)."""
-        for rec in reversed(self._counted):
-            if not rec.serials.size or not rec.serials[0] <= serial <= rec.serials[-1]:
-                continue
-            i = int(np.searchsorted(rec.serials, serial))
-            if i >= rec.serials.size or rec.serials[i] != serial:
-                continue  # (a sweep's serials span other sensors' batches)
+        hit = self._by_serial.get(serial)
+        if hit is not None:
+            rec, i = hit
             grid = self._grids.get(rec.sensor_id)
-            if not rec.alive[i] or grid is not rec.grid:
+            if not rec.alive[i] or grid is None or grid.number != rec.grid:
                 return None
             key = int(grid.cells(rec.z[i : i + 1])[0])
             return _Found(
@@ -667,29 +753,14 @@ class ClutterMap:
                 -1,
             )
         for sensor_id, sweep in self._sweeps.items():
-            for b, numbers in enumerate(sweep.serials):
-                hit = np.flatnonzero(numbers == serial)
-                grid = self._grids.get(sensor_id)
-                if not hit.size or grid is None:
-                    continue
-                i = int(hit[0])
-                key = int(grid.cells(sweep.waiting[b][i : i + 1])[0])
-                block = _around(key)
-                waiting = sum(
-                    int(np.isin(grid.cells(w), block).sum()) for w in sweep.seen if len(w)
-                )
-                return _Found(
-                    serial,
-                    sensor_id,
-                    grid,
-                    key,
-                    1.0,
-                    _block_seen(grid, key) + waiting,
-                    None,
-                    i,
-                    sweep,
-                    b,
-                )
+            where = sweep.find(serial)
+            grid = self._grids.get(sensor_id)
+            if where is None or grid is None:
+                continue
+            b, i = where
+            key = int(grid.cells(sweep.waiting[b][i : i + 1])[0])
+            seen = _block_seen(grid, key) + sweep.seen_in(grid, _around(key))
+            return _Found(serial, sensor_id, grid, key, 1.0, seen, None, i, sweep, b)
         return None
 
     def _remember(self, sensor_id: str, grid: _Grid, z: np.ndarray, serials: np.ndarray) -> None:
@@ -702,16 +773,22 @@ class ClutterMap:
         self._counted.append(
             _Counted(
                 sensor_id=sensor_id,
-                grid=grid,
+                grid=grid.number,
                 scan=grid.scans,
                 serials=numbers,
                 z=z[known][order],
                 alive=np.ones(numbers.size, dtype=bool),
             )
         )
+        rec = self._counted[-1]
+        self._by_serial.update((n, (rec, i)) for i, n in enumerate(numbers.tolist()))
         self._counted_points += numbers.size
         while len(self._counted) > COUNTED_BATCHES or self._counted_points > COUNTED_POINTS:
-            self._counted_points -= self._counted.popleft().serials.size
+            old = self._counted.popleft()
+            self._counted_points -= old.serials.size
+            for n in old.serials.tolist():
+                if self._by_serial.get(n, (None,))[0] is old:
+                    del self._by_serial[n]
 
     def settle(self, accepted: Sequence[str], rejected: Sequence[str]) -> None:
         """The fates of tracks that held detections back: ``accepted`` (confirmed, continuing
@@ -764,8 +841,10 @@ class ClutterMap:
         self._held, self._holding = {}, {}
         self._counted.clear()
         self._counted_points = 0
+        self._by_serial = {}
         for sweep in self._sweeps.values():
             sweep.serials = [np.full(len(z), -1, dtype=np.int64) for z in sweep.waiting]
+            sweep.firsts, sweep.batches = [], []
 
     def _drop_stale(self) -> None:
         """Forget held-back detections older than :data:`HELD_SCANS` of their sensor's

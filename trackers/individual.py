@@ -850,8 +850,9 @@ class IndividualTracker:
         # A track that took its third detection now is a target's whatever its status: its
         # first two, which the map counted when it had fewer, are taken back to be held too.
         assert ESTABLISHED_HITS == 3  # (a track knows the serials of its first and last only)
-        third = at[(hits[at] == ESTABLISHED_HITS) & (tracks.hits[at] == ESTABLISHED_HITS - 1)]
-        third = third[~tracks.confirmed[third]]
+        took_third = (hits[at] == ESTABLISHED_HITS) & (tracks.hits[at] == ESTABLISHED_HITS - 1)
+        took_third &= ~tracks.confirmed[at]
+        third = at[took_third]
         earlier = np.stack([tracks.first[third], tracks.took[third]], axis=1)
         held = HeldDetections(
             rows=ad[hold],
@@ -859,6 +860,7 @@ class IndividualTracker:
             serials=serial + ad[hold],
             earlier=earlier.ravel(),
             earlier_holders=tuple(np.repeat(tracks.ids[third], 2).tolist()),
+            earlier_thirds=np.repeat(ad[took_third], 2),
         )
         new = replace(
             tracks,

@@ -355,6 +355,9 @@ class HeldDetections:
     serials: np.ndarray
     earlier: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
     earlier_holders: tuple[str, ...] = ()
+    #: the row of the point tracker's scan that each of them took now (its third), one a
+    #: serial of ``earlier``
+    earlier_thirds: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.intp))
 
     @staticmethod
     def none() -> HeldDetections:

@@ -416,7 +416,9 @@ class TrackingPipeline:
                 swept = True
         sector = arc is not None
         held = point.held
+        seen = False  # the scan's detections were counted as seen (or gathered with a sweep)
         if mapped and (sector or (whole and scan.size)) and self._map_disc(scan):
+            seen = True
             mask = point.clutter
             picked = (
                 np.arange(rows.size) if mask is None else np.flatnonzero(np.asarray(mask, bool))
@@ -441,7 +443,12 @@ class TrackingPipeline:
                 z = scan.z.take(rows.take(held.rows), axis=0)
                 self._clutter.hold(scan.sensor_id, z, held.holders, held.serials)
         if held.earlier.size:  # (counted at scans of their own, perhaps of other sensors)
-            self._clutter.reclaim(held.earlier, held.earlier_holders)
+            thirds = scan.z.take(rows.take(held.earlier_thirds), axis=0)
+            self._clutter.reclaim(
+                held.earlier,
+                held.earlier_holders,
+                (scan.sensor_id, thirds, arc is not None) if seen else None,
+            )
         if point.accepted or point.rejected:
             self._clutter.settle(point.accepted, point.rejected)
 
