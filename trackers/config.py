@@ -465,7 +465,10 @@ class ExtendedConfig:
     in ``birth_scans`` scans in a row spanning ``birth_time`` and moving as one (no faster than
     ``max_speed``), starts a track (a scan of another sensor than the one that saw the cluster
     last does not break the row when it misses it); until then an object's detections may
-    confirm individual tracks, which the new track absorbs. Individual tracks inside a track's
+    confirm individual tracks, which the new track absorbs. The detections of older confirmed
+    tracks count for a cluster only if the tracks move together, within
+    ``group_speed_spread``, and the cluster moves faster than that (stopped cars in a queue
+    are each their own target). Individual tracks inside a track's
     resolution cell (its extent grown by half the resolution distance) have detection
     probability ``in_cell_pd``;
     those inside its extent that move with it (velocities within ``group_speed_spread``) for

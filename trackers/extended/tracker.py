@@ -41,7 +41,8 @@ Each scan (:meth:`ExtendedTracker.propose`, then :meth:`~ExtendedTracker.commit`
    scan of its sensor may miss it, once: :data:`RUN_MISSES`) spanning at least
    ``birth_time`` seconds and moving at no more than ``max_speed``, starts a tentative
    extended track with those of them that are explained by no confirmed individual track or
-   by confirmed tracks moving together (with each other and with the cluster's run), less
+   by confirmed tracks moving together (with each other and with the cluster's run, which
+   must move faster than ``group_speed_spread``: cars queued at a red light are no group), less
    those of targets being acquired (tracks of ``ESTABLISHED_HITS`` detections, confirmed or
    not, that explain them one to one: alone with a detection, two side by side, or rivals
    of one start); a cluster that lies among more detections of individual targets (explained
@@ -1359,6 +1360,9 @@ def _group_clusters(
         run_v, run_sd = moving
         off = np.hypot(*(v - np.take(run_v, uc, axis=0)).T)
         near &= off <= cfg.group_speed_spread + 2.0 * np.take(run_sd, uc)
+        # At rest, moving together says nothing: cars queued at a junction are each their
+        # own target, and a group born over them took the queue (both approaches, at times).
+        near &= np.take(np.hypot(*run_v.T) > cfg.group_speed_spread, uc)
     near &= np.bincount(uc, weights=near, minlength=K)[uc] >= 2
     ok = near[np.searchsorted(uniq, key)]
     if ok.all():

@@ -1041,3 +1041,53 @@ def test_a_group_takes_far_detections_only_where_clutter_is_as_rare_as_configure
         assert taken == {f"own{i}" for i in range(4)} | {f"far{i}" for i in range(6)}
     else:  # (its one resolution subset is all or nothing: it coasts this scan)
         assert not taken & {f"far{i}" for i in range(6)}
+
+
+def _queue_run(seed: int, spacing: float = 8.0) -> tuple[int, float]:
+    """Five cars at 15 m/s on one road, 2 s apart, braking at 2 m/s² into a queue ``spacing``
+    m apart (centre to centre) at a red light, standing 30 s, then going again; a 1 s radar,
+    5 m noise, P_D 0.9, 3 false alarms a scan over 800 m x 800 m, no density stated. Returns
+    the scans at which an extended track was confirmed and the share of car-scans held by a
+    confirmed individual track within 15 m."""
+    rng = np.random.default_rng(seed)
+    pipe = TrackingPipeline.all_kinds(TrackerConfig())
+    v0, dec, acc, stop = 15.0, 2.0, 1.5, 30.0
+    grouped = held = looked = 0
+    for t in range(121):
+        cars = []
+        for i in range(5):
+            y_stop, t_stop, t_go = -10.0 - i * spacing, 30.0 + 2.0 * i, 30.0 + stop + 1.5 * i
+            if t <= t_stop - v0 / dec:
+                y = y_stop - v0 * v0 / (2 * dec) - v0 * (t_stop - v0 / dec - t)
+            elif t <= t_stop:
+                y = y_stop - 0.5 * dec * (t_stop - t) ** 2
+            elif t <= t_go:
+                y = y_stop
+            else:
+                tau = min(t - t_go, v0 / acc)
+                y = y_stop + 0.5 * acc * tau * tau + v0 * max(0.0, t - t_go - v0 / acc)
+            if -390.0 < y < 390.0:
+                cars.append((1.75, y))
+        x = np.array(cars).reshape(-1, 2)
+        seen = x[rng.random(len(x)) < 0.9]
+        z = np.vstack(
+            [seen + rng.normal(0, 5.0, seen.shape), rng.uniform(-400, 400, (rng.poisson(3), 2))]
+        )
+        res = pipe.process(Scan("road", float(t), z, np.tile(25.0 * np.eye(2), (len(z), 1, 1))))
+        confirmed = res.confirmed()
+        grouped += any(c.kind == "extended" for c in confirmed)
+        p = np.array([c.position for c in confirmed if c.kind == "individual"]).reshape(-1, 2)
+        for car in x:
+            looked += 1
+            held += bool(p.size) and float(np.hypot(*(p - car).T).min()) < 15.0
+    return grouped, held / looked
+
+
+def test_a_queue_of_stopped_cars_is_no_group() -> None:
+    """Cars queued at a red light move together at 0 m/s: a group born over the queue
+    lowered their detection probability and held them (3 runs: an extended track confirmed
+    at 38-61 of the 121 scans, car-scans held 0.61-0.68; extended tracking off, 0.85-0.91).
+    At rest, moving together is no evidence of a group: none now, held 0.85-0.90."""
+    for seed in range(3):
+        grouped, held = _queue_run(seed)
+        assert grouped == 0 and held >= 0.8
