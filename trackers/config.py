@@ -467,8 +467,8 @@ class ExtendedConfig:
     last does not break the row when it misses it); until then an object's detections may
     confirm individual tracks, which the new track absorbs. The detections of older confirmed
     tracks count for a cluster only if the tracks move together, within
-    ``group_speed_spread``, and the cluster moves faster than that (stopped cars in a queue
-    are each their own target). Individual tracks inside a track's
+    ``group_speed_spread``, and their median velocity is faster than that (stopped cars in a
+    queue are each their own target). Individual tracks inside a track's
     resolution cell (its extent grown by half the resolution distance) have detection
     probability ``in_cell_pd``;
     those inside its extent that move with it (velocities within ``group_speed_spread``) for

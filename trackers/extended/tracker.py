@@ -41,8 +41,8 @@ Each scan (:meth:`ExtendedTracker.propose`, then :meth:`~ExtendedTracker.commit`
    scan of its sensor may miss it, once: :data:`RUN_MISSES`) spanning at least
    ``birth_time`` seconds and moving at no more than ``max_speed``, starts a tentative
    extended track with those of them that are explained by no confirmed individual track or
-   by confirmed tracks moving together (with each other and with the cluster's run, which
-   must move faster than ``group_speed_spread``: cars queued at a red light are no group), less
+   by confirmed tracks moving together (with each other and with the cluster's run, their
+   median faster than ``group_speed_spread``: cars queued at a red light are no group), less
    those of targets being acquired (tracks of ``ESTABLISHED_HITS`` detections, confirmed or
    not, that explain them one to one: alone with a detection, two side by side, or rivals
    of one start); a cluster that lies among more detections of individual targets (explained
@@ -1320,7 +1320,8 @@ def _group_clusters(
     """The detections of each cluster (rows of the scan) that a group may hold: those no
     confirmed individual track explains, and those of confirmed tracks that move together
     (within ``group_speed_spread`` of the median velocity of the cluster's tracks, two
-    tracks at least). With ``since`` (one time per cluster), a track created since explains
+    tracks at least, the median itself faster than that: tracks at rest together are
+    targets each). With ``since`` (one time per cluster), a track created since explains
     that cluster's detections only if it is resolved (its gate holds one detection, which no
     other gate holds). With ``moving`` (each cluster's run velocity ``(K, 2)`` and its std
     ``(K,)``), tracks that move together move with their cluster too: within
@@ -1360,9 +1361,11 @@ def _group_clusters(
         run_v, run_sd = moving
         off = np.hypot(*(v - np.take(run_v, uc, axis=0)).T)
         near &= off <= cfg.group_speed_spread + 2.0 * np.take(run_sd, uc)
-        # At rest, moving together says nothing: cars queued at a junction are each their
-        # own target, and a group born over them took the queue (both approaches, at times).
-        near &= np.take(np.hypot(*run_v.T) > cfg.group_speed_spread, uc)
+    # At rest, moving together says nothing: cars queued at a junction are each their own
+    # target, and a group born over them took the queue (both approaches, at times). The
+    # tracks' median tells (a run's velocity, from centroids of whichever of an object's
+    # returns were seen, is the noisier).
+    near &= np.take(np.hypot(*median.T) > cfg.group_speed_spread, uc)
     near &= np.bincount(uc, weights=near, minlength=K)[uc] >= 2
     ok = near[np.searchsorted(uniq, key)]
     if ok.all():

@@ -1087,7 +1087,7 @@ def test_a_queue_of_stopped_cars_is_no_group() -> None:
     """Cars queued at a red light move together at 0 m/s: a group born over the queue
     lowered their detection probability and held them (3 runs: an extended track confirmed
     at 38-61 of the 121 scans, car-scans held 0.61-0.68; extended tracking off, 0.85-0.91).
-    At rest, moving together is no evidence of a group: none now, held 0.85-0.90."""
+    At rest, moving together is no evidence of a group: none now, held 0.85-0.89."""
     for seed in range(3):
         grouped, held = _queue_run(seed)
         assert grouped == 0 and held >= 0.8
