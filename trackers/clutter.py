@@ -702,23 +702,23 @@ class ClutterMap:
             found = [(s, f) for s, f in found if f is not None]
             # where the track's own detections lie, with their weights now: those found, those
             # a sibling holds already, and its third (in the cells it was counted in)
-            mine = [(f.sensor_id, f.grid, f.key, f.weight, f.sweep is not None) for _, f in found]
+            mine = [(f.grid, f.key, f.weight, f.sweep is not None) for _, f in found]
             for s in own:
                 e = held.get(s)
                 grid = None if e is None else self._grids.get(e[0])
                 if grid is not None and grid is e[4]:
                     key = int(grid.cells(np.array([e[1:3]]))[0])
-                    mine.append((e[0], grid, key, _GAMMA ** (grid.scans - e[3]), False))
+                    mine.append((grid, key, _GAMMA ** (grid.scans - e[3]), False))
             if thirds is not None and holder in third_of:
                 grid = self._grids.get(thirds[0])
                 if grid is not None:
                     key = int(grid.cells(third_of[holder][None])[0])
-                    mine.append((thirds[0], grid, key, 1.0, thirds[2]))
+                    mine.append((grid, key, 1.0, thirds[2]))
             for s, f in found:
                 block = _around(f.key)
                 own_here = sum(
                     w
-                    for sensor, grid, key, w, waiting in mine
+                    for grid, key, w, waiting in mine
                     if grid is f.grid and key in block and (not waiting or f.sweep is not None)
                 )
                 if f.seen - own_here <= RECLAIM_RATE * f.grid.exposure():
