@@ -165,6 +165,11 @@ def time_jump_detail(
         )
     else:
         remedy = "if this sensor's clock is right, raise ingest.max_time_jump: PATCH /api/v1/config"
+    # (a newcomer's second run, started on a later time line, was refused batch by batch)
+    remedy += (
+        "; a new run or recording on a later time line: POST /api/v1/reset (with the API "
+        "token) drops the tracks and the last time first"
+    )
     return (
         f"time {batch_time} is {batch_time - last:.6g} s after the last processed time {last}: "
         f"more than {why} plus the {waited:.3g} s of wall time since ({remedy})"

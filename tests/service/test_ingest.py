@@ -98,7 +98,10 @@ def test_time_jump_counts_the_wall_time_waited() -> None:
     assert detail is not None
     assert detail.startswith("time 111.0 is 101 s after the last processed time 10.0: ")
     assert "ingest.max_time_jump = 100.0 s plus the 0.5 s of wall time since" in detail
-    assert detail.endswith("raise ingest.max_time_jump: PATCH /api/v1/config)")  # the remedy
+    assert "raise ingest.max_time_jump: PATCH /api/v1/config; " in detail  # the remedies
+    assert detail.endswith(
+        "POST /api/v1/reset (with the API token) drops the tracks and the last time first)"
+    )
 
 
 def test_reorder_buffer_releases_in_time_order_behind_the_newest() -> None:
