@@ -374,6 +374,11 @@ class TrackManagementConfig:
     revisits only while the track's gate expects fewer than 0.1 false alarms. Time spent
     inside an extended track's resolution cell counts at the rate ``extended.in_cell_pd /
     pd`` there (the object hides it: a vehicle beside a convoy coasts that much longer).
+    A sensor whose batches come more often than ``miss_correlation_time`` τ (a camera) does not
+    miss a target independently at each frame: a miss of a confirmed track whose peak score is
+    ``delete_drop_from_peak`` above the confirmation threshold costs ``min(1, Δ/τ) ln(1 − P_D)``,
+    Δ the longer of the time since the track's last look and the sensor's interval, so that it
+    coasts through an occlusion of about ``τ ΔL_drop / |ln(1 − P_D)|`` (2.5 s at P_D 0.95).
     """
 
     pd: float = _field(0.9, "detection probability, when a batch carries none", gt=0, le=1)
@@ -399,6 +404,16 @@ class TrackManagementConfig:
         "a confirmed track is deleted when its score falls this far below its peak",
         gt=0,
         le=1e6,
+    )
+    miss_correlation_time: float = _field(
+        0.5,
+        "a sensor that looks at a confirmed track more often than this (s) does not miss it"
+        " independently at each look (a pillar or a passing van hides a walker for a while):"
+        " each miss lowers the score by its share Δ/τ of ln(1 − P_D), Δ the time since the"
+        " track's last look or the sensor's interval between batches, whichever is longer"
+        " (0: every miss in full)",
+        ge=0,
+        le=60.0,
     )
     max_coast_time: float = _field(
         10.0,

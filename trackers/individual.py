@@ -579,7 +579,7 @@ class IndividualTracker:
                     interval,
                 ) <= tm.max_coast_time
             tracks, claims, range_rates, established, gated, held = self._update_existing(
-                pred, scan, pd, lam_fa, visible, searching, serial, masked >= 1.0
+                pred, scan, pd, lam_fa, visible, searching, serial, masked >= 1.0, interval
             )
             look = _looks(pred.tracks, visible, masked, t, pd_coast)
             looks = int(np.count_nonzero(look))
@@ -739,6 +739,7 @@ class IndividualTracker:
         searching: np.ndarray | None,
         serial: int,
         free: np.ndarray | None = None,
+        interval: float = 0.0,
     ) -> tuple[
         TrackArrays,
         np.ndarray,
@@ -759,7 +760,9 @@ class IndividualTracker:
         :data:`ESTABLISHED_HITS` detections (whatever their instants: a target's, not
         clutter), the gated pairs (track and detection indices), and those of the taken
         detections that tentative tracks of that many detections hold back from the clutter
-        map (:class:`~trackers.peers.HeldDetections`)."""
+        map (:class:`~trackers.peers.HeldDetections`). ``interval`` is the sensor's mean
+        interval between batches (0: not known yet), for the share of a miss a fast sensor's
+        look costs (``track_management.miss_correlation_time``)."""
         config, tracks = pred.config, pred.tracks
         x_pred, P_pred, c_bar = pred.x_pred, pred.P_pred, pred.c_bar
         pairs = pred.gated(scan, config.gating.threshold)
@@ -808,7 +811,21 @@ class IndividualTracker:
             )
 
         x, P, mu = x_pred.copy(), P_pred.copy(), c_bar.copy()
-        score = tracks.score + miss_increment(pd if visible is None else pd * visible)
+        missed = miss_increment(pd if visible is None else pd * visible)
+        tm = config.track_management
+        if 0.0 < interval < tm.miss_correlation_time:
+            # A sensor that looks more often than τ does not miss a target independently at
+            # each look (a pillar hides a walker from a camera for a second or two): a track
+            # that has shown a target, its score a full drop above confirmation, pays the
+            # share Δ/τ of a miss, Δ the longer of the time since its last look and the
+            # sensor's interval (known from its second batch: until then, in full).
+            shown = tracks.confirmed & (
+                tracks.peak >= tm.confirm_threshold + tm.delete_drop_from_peak
+            )
+            since = np.maximum(scan.time - tracks.looked, interval)
+            share = np.minimum(since / tm.miss_correlation_time, 1.0)
+            missed = missed * np.where(shown, share, 1.0)
+        score = tracks.score + missed
         xu, Pu, muu, hit = xu[sel], Pu[sel], muu[sel], hit[sel]
         if found is not None:
             at, ad = np.concatenate([at, found.track]), np.concatenate([ad, found.detection])

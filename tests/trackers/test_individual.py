@@ -108,6 +108,64 @@ def test_confirmed_track_is_deleted_after_drop_from_peak_and_reported():
     assert res.deleted == (tid,)
 
 
+def test_an_established_tracks_misses_at_a_fast_sensor_cost_their_share_of_a_miss():
+    """A camera at 20 Hz does not miss a walker independently at each frame: a miss of a track
+    whose score rose a full drop above confirmation costs Δ/τ of ln(1 − P_D) (Δ = 0.05 s,
+    τ = miss_correlation_time 0.5 s); a track just confirmed, or one of a 1 s sensor, pays
+    it in full."""
+    c = config(pd=0.95, clutter_density=1e-6)
+    tm = c.track_management
+    frame, miss = 0.05, math.log(0.05)
+    tr = IndividualTracker(c)
+    for k in range(20):
+        res = tr.step(scan_at(k * frame, [0.0, 0.0], pd=0.95))
+    (before,) = res.confirmed()
+    assert before.score > tm.confirm_threshold + tm.delete_drop_from_peak
+    (after,) = tr.step(scan_at(20 * frame, np.zeros((0, 2)), pd=0.95)).tracks
+    assert after.score - before.score == pytest.approx(miss * frame / 0.5, rel=1e-6)
+
+    young = IndividualTracker(c)
+    for k in range(3):
+        res = young.step(scan_at(k * frame, [0.0, 0.0], pd=0.95))
+    (before,) = res.confirmed()
+    assert before.score < tm.confirm_threshold + tm.delete_drop_from_peak
+    (after,) = young.step(scan_at(3 * frame, np.zeros((0, 2)), pd=0.95)).tracks
+    assert after.score - before.score == pytest.approx(miss)
+
+    radar = IndividualTracker(c)
+    for k in range(20):
+        res = radar.step(scan_at(k, [0.0, 0.0], pd=0.95))
+    (before,) = res.confirmed()
+    (after,) = radar.step(scan_at(20, np.zeros((0, 2)), pd=0.95)).tracks
+    assert after.score - before.score == pytest.approx(miss)
+
+
+@pytest.mark.parametrize("tau", [0.5, 0.0])
+def test_a_walker_hidden_from_a_fast_camera_for_a_second_and_a_half_keeps_its_track(tau):
+    """A walker at 1.4 m/s seen by a 20 Hz camera (0.3 m, P_D 0.95 stated, defaults otherwise)
+    walks behind a pillar for 1.5 s (30 frames). With the misses of its frames correlated
+    (the default) its track coasts through; judged frame by frame (τ = 0) it was deleted
+    after 6 frames, 0.3 s, and came back with a new id."""
+    tr = IndividualTracker(
+        TrackerConfig().merged({"track_management": {"miss_correlation_time": tau}})
+    )
+    rng = np.random.default_rng(3)
+    ids_before, ids_after = set(), set()
+    for k in range(300):
+        t = k / 20.0
+        truth = np.array([10.0 + 1.4 * t, 50.0])
+        hidden = 8.0 <= t < 9.5
+        z = np.zeros((0, 2)) if hidden else truth + rng.normal(0.0, 0.3, (1, 2))
+        res = tr.step(scan_at(t, z, pd=0.95, sigma=0.3))
+        near = {x.id for x in res.confirmed() if math.dist(x.position, truth) < 1.5}
+        if 6.0 <= t < 8.0:
+            ids_before |= near
+        elif t >= 10.0:
+            ids_after |= near
+    assert len(ids_before) == 1
+    assert (ids_after == ids_before) == (tau > 0)
+
+
 def test_max_coast_time_deletes():
     tr = IndividualTracker(config(pd=0.9, clutter_density=1e-6, max_coast_time=3.5))
     for k in range(10):
