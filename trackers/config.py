@@ -378,7 +378,7 @@ class TrackManagementConfig:
     miss a target independently at each frame: a miss of a confirmed track whose peak score is
     ``delete_drop_from_peak`` above the confirmation threshold costs ``min(1, Δ/τ) ln(1 − P_D)``,
     Δ the longer of the time since the track's last look and the sensor's interval, so that it
-    coasts through an occlusion of about ``τ ΔL_drop / |ln(1 − P_D)|`` (2.5 s at P_D 0.95).
+    coasts through an occlusion of about ``τ ΔL_drop / |ln(1 − P_D)|`` (1.5 s at P_D 0.95).
     """
 
     pd: float = _field(0.9, "detection probability, when a batch carries none", gt=0, le=1)
@@ -406,7 +406,7 @@ class TrackManagementConfig:
         le=1e6,
     )
     miss_correlation_time: float = _field(
-        0.5,
+        0.3,
         "a sensor that looks at a confirmed track more often than this (s) does not miss it"
         " independently at each look (a pillar or a passing van hides a walker for a while):"
         " each miss lowers the score by its share Δ/τ of ln(1 − P_D), Δ the time since the"
