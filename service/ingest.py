@@ -161,15 +161,14 @@ def time_jump_detail(
         remedy = (
             "this sensor's clock and that of the sensors before it differ: all sensors must "
             "share one time line, such as Unix time in seconds; the service keeps the time "
-            "line of the batches it processed"
+            "line of the batches it processed until POST /api/v1/reset"
         )
-    else:
-        remedy = "if this sensor's clock is right, raise ingest.max_time_jump: PATCH /api/v1/config"
-    # (a newcomer's second run, started on a later time line, was refused batch by batch)
-    remedy += (
-        "; a new run or recording on a later time line: POST /api/v1/reset (with the API "
-        "token) drops the tracks and the last time first"
-    )
+    else:  # (a newcomer's second run, on a later time line, was refused batch by batch)
+        remedy = (
+            "if this sensor's clock is right, raise ingest.max_time_jump: PATCH /api/v1/config"
+            "; if every sensor moved on to a new run or recording: POST /api/v1/reset (with the "
+            "API token) drops the tracks and the last time first"
+        )
     return (
         f"time {batch_time} is {batch_time - last:.6g} s after the last processed time {last}: "
         f"more than {why} plus the {waited:.3g} s of wall time since ({remedy})"

@@ -376,9 +376,10 @@ class TrackManagementConfig:
     pd`` there (the object hides it: a vehicle beside a convoy coasts that much longer).
     A sensor whose batches come more often than ``miss_correlation_time`` τ (a camera) does not
     miss a target independently at each frame: a miss of a confirmed track whose peak score is
-    ``delete_drop_from_peak`` above the confirmation threshold costs ``min(1, Δ/τ) ln(1 − P_D)``,
-    Δ the longer of the time since the track's last look and the sensor's interval, so that it
-    coasts through an occlusion of about ``τ ΔL_drop / |ln(1 − P_D)|`` (1.5 s at P_D 0.95).
+    ``delete_drop_from_peak`` above the confirmation threshold costs
+    ``max(ln(1 − P_D), min(1, Δ/τ) min(ln(1 − P_D), ln 0.1))``, Δ the longer of the time since
+    the track's last look and the sensor's interval, so that it coasts through an occlusion of
+    about ``τ ΔL_drop / max(|ln(1 − P_D)|, |ln 0.1|)`` (1.5 s at P_D 0.95, 2 s at 0.9 or less).
     """
 
     pd: float = _field(0.9, "detection probability, when a batch carries none", gt=0, le=1)
@@ -409,9 +410,9 @@ class TrackManagementConfig:
         0.3,
         "a sensor that looks at a confirmed track more often than this (s) does not miss it"
         " independently at each look (a pillar or a passing van hides a walker for a while):"
-        " each miss lowers the score by its share Δ/τ of ln(1 − P_D), Δ the time since the"
-        " track's last look or the sensor's interval between batches, whichever is longer"
-        " (0: every miss in full)",
+        " each miss lowers the score by its share Δ/τ of ln(1 − P_D) (of ln 0.1 at least,"
+        " never more than the miss), Δ the time since the track's last look or the sensor's"
+        " interval between batches, whichever is longer (0: every miss in full)",
         ge=0,
         le=60.0,
     )

@@ -100,7 +100,8 @@ def test_time_jump_counts_the_wall_time_waited() -> None:
     assert "ingest.max_time_jump = 100.0 s plus the 0.5 s of wall time since" in detail
     assert "raise ingest.max_time_jump: PATCH /api/v1/config; " in detail  # the remedies
     assert detail.endswith(
-        "POST /api/v1/reset (with the API token) drops the tracks and the last time first)"
+        "if every sensor moved on to a new run or recording: POST /api/v1/reset (with the "
+        "API token) drops the tracks and the last time first)"
     )
 
 

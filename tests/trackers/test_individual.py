@@ -141,6 +141,59 @@ def test_an_established_tracks_misses_at_a_fast_sensor_cost_their_share_of_a_mis
     assert after.score - before.score == pytest.approx(miss)
 
 
+def test_a_fast_sensors_miss_of_a_hidden_target_costs_at_least_a_share_of_p_d_09s():
+    """A camera of P_D 0.5 misses a hidden walker however often it would see him in sight: a
+    miss costs the share Δ/τ of ln 0.1 (not of ln 0.5, which let its tracks coast 6.4 s), and
+    never more than the miss itself: ln 0.7 at P_D 0.3."""
+    frame = 0.05
+    for pd, expected in ((0.5, math.log(0.1) * frame / 0.3), (0.3, math.log(0.7))):
+        tr = IndividualTracker(config(pd=pd, clutter_density=1e-6))
+        for k in range(40):
+            res = tr.step(scan_at(k * frame, [0.0, 0.0], pd=pd))
+        (before,) = res.confirmed()
+        (after,) = tr.step(scan_at(40 * frame, np.zeros((0, 2)), pd=pd)).tracks
+        assert after.score - before.score == pytest.approx(expected, rel=1e-6)
+
+
+def test_a_radar_that_streams_its_turn_by_sectors_misses_a_track_in_full():
+    """A 1 s radar reporting its turn as 10 stated sectors sends a batch every 0.1 s, faster
+    than miss_correlation_time, but looks at a track once a turn: Δ is the time since the
+    track's last look, so each miss costs in full and a target that vanishes loses its track
+    as with τ = 0 (with Δ the sensor's interval alone it was deleted 4 s later)."""
+
+    def sector(k: int) -> Coverage:
+        a = np.linspace(2 * np.pi * k / 10, 2 * np.pi * (k + 1) / 10, 8)
+        return Coverage(polygon=np.vstack([[0.0, 0.0], np.c_[2e4 * np.cos(a), 2e4 * np.sin(a)]]))
+
+    def deleted_after(tau: float) -> tuple[float, list[float]]:
+        tr = IndividualTracker(
+            TrackerConfig().merged({"track_management": {"miss_correlation_time": tau}})
+        )
+        rng = np.random.default_rng(0)
+        scores, tid = [], None
+        for turn in range(60):
+            for k in range(10):
+                t = turn + (k + 1) / 10
+                x = np.array([5000.0 + 10.0 * t, 3000.0 - 5.0 * t])
+                b = math.atan2(x[1], x[0]) % (2 * np.pi)
+                seen = 2 * np.pi * k / 10 <= b < 2 * np.pi * (k + 1) / 10
+                z = x + rng.normal(0.0, 30.0, (1, 2))
+                z = z if seen and t < 30 and rng.random() < 0.9 else np.zeros((0, 2))
+                scan = replace(scan_at(t, z, pd=0.9, sigma=30.0), coverage=sector(k))
+                res = tr.step(scan)
+                if t < 30 and res.confirmed():
+                    (track,) = res.confirmed()
+                    tid = track.id
+                    scores.append(track.score)
+                if t >= 30 and tid in res.deleted:
+                    return t - 30, scores
+        raise AssertionError("never deleted")
+
+    default, scores = deleted_after(TrackerConfig().track_management.miss_correlation_time)
+    assert (default, scores) == deleted_after(0.0)
+    assert default < 10.0
+
+
 @pytest.mark.parametrize("tau", [0.3, 0.0])
 def test_a_walker_hidden_from_a_fast_camera_for_a_second_keeps_its_track(tau):
     """A walker at 1.4 m/s seen by a 20 Hz camera (0.3 m, P_D 0.95 stated, defaults otherwise)
