@@ -53,6 +53,7 @@ from trackers.detection_rate import (
     MAX_SENSORS,
     MIN_MISSES,
     DetectionRates,
+    SensorRate,
     coast_revisits,
 )
 from trackers.filters.imm import (
@@ -1106,9 +1107,10 @@ class Checkpoint:
     state: _State
 
     def export(self) -> StateSection:
-        """Plain data: the time, the id and origin counters, the motion models' names, and
+        """Plain data: the time, the id and origin counters, the motion models' names,
         every field of the tracks and the two-point candidates as arrays (ids and detection
-        ids as packed UTF-8)."""
+        ids as packed UTF-8), and each sensor's learned detection rate and interval between
+        batches (:mod:`trackers.detection_rate`)."""
         st = self.state
         tr, cand = st.tracks, st.candidates
         groups = tr.detection_ids.tolist()
@@ -1124,6 +1126,17 @@ class Checkpoint:
         arrays["candidates.grouped"] = grouped
         arrays["candidates.group_velocity"] = np.where(grouped[:, None], cand.group_velocity, 0.0)
         arrays["candidates.offered"] = cand.offered
+        # each sensor's learned P_D and interval between batches (since 2026-11-28; an
+        # interval not known yet is written as 0)
+        rates = st.rates.sensors
+        put_strings(arrays, "rates.sensors", list(rates))
+        arrays["rates.values"] = np.array(
+            [
+                [r.time, r.looks, r.detected, 0.0 if math.isnan(r.interval) else r.interval]
+                for r in rates.values()
+            ],
+            dtype=float,
+        ).reshape(-1, 4)
         values = {
             "time": st.time,
             "next_id": st.next_id,
@@ -1132,6 +1145,7 @@ class Checkpoint:
             "models": list(st.config.motion.models),
             "n_tracks": len(tr),
             "n_candidates": len(cand),
+            "n_rates": len(rates),
         }
         return StateSection(values, arrays)
 
@@ -1249,6 +1263,7 @@ def _import(section: StateSection, config: TrackerConfig, id_prefix: str = "") -
     )
     if "next_serial" not in r.values:  # (serials of a tracker that numbered none)
         candidates = replace(candidates, serial=np.full(k, -1, dtype=np.int64))
+    rates = _read_rates(r, t)
     r.finish()
 
     def bad(detail: str) -> StateError:
@@ -1299,6 +1314,36 @@ def _import(section: StateSection, config: TrackerConfig, id_prefix: str = "") -
         next_id=next_id,
         next_origin=next_origin,
         next_serial=next_serial,
+        rates=rates,
+    )
+
+
+def _read_rates(r: SectionReader, t: float | None) -> DetectionRates:
+    """The sensors' learned detection rates that :meth:`Checkpoint.export` wrote (none in a
+    file from before 2026-11-28: learned afresh), checked."""
+    if "n_rates" not in r.values:
+        return DetectionRates()
+    m = r.integer("n_rates", ge=0)
+    if m > MAX_SENSORS:
+        raise StateError(f"point.n_rates: at most {MAX_SENSORS}, got {m}")
+    names = r.strings("rates.sensors", m)
+    values = r.floats("rates.values", (m, 4))
+    if len(set(names)) != m:
+        raise StateError("point.rates.sensors: a sensor appears twice")
+    heard, looks, detected, interval = values.T
+    if (looks < 0).any() or (detected < 0).any() or (detected > looks * (1 + 1e-9)).any():
+        raise StateError("point.rates.values: looks and detections must be 0 <= detected <= looks")
+    if (interval < 0).any() or (t is not None and (heard > t).any()):
+        raise StateError("point.rates.values: an interval below 0 or a time after the state's")
+    return DetectionRates(
+        MappingProxyType(
+            {
+                str(name): SensorRate(
+                    float(h), float(lo), float(d), float(iv) if iv > 0 else math.nan
+                )
+                for name, h, lo, d, iv in zip(names, heard, looks, detected, interval, strict=True)
+            }
+        )
     )
 
 

@@ -181,6 +181,48 @@ def test_a_restored_pipeline_of_radars_reporting_together_goes_on_exactly(at: in
         assert tracks_of(b) == tracks_of(a)
 
 
+def test_a_restored_camera_goes_on_exactly_with_its_learned_rates() -> None:
+    """A 20 Hz camera stating no P_D, saved while a walker is hidden: the restored tracker
+    knows the P_D its tracks showed and the camera's interval between frames (since
+    2026-11-28), so the walker's track coasts on and goes on exactly as without the restart.
+    A file from before has none: they are learned afresh."""
+    rng = np.random.default_rng(5)
+    frames = []
+    for k in range(240):
+        t = k / 20.0
+        hidden = 8.0 <= t < 9.0 or rng.random() < 0.08
+        z = (
+            np.zeros((0, 2))
+            if hidden
+            else np.array([[10.0 + 1.4 * t, 50.0]]) + rng.normal(0, 0.3, (1, 2))
+        )
+        R = np.tile(0.09 * np.eye(2), (len(z), 1, 1))
+        frames.append(Scan("cam", t, z, R, clutter_density=1e-4))  # (the map is not saved)
+    a = TrackingPipeline()
+    for scan in frames[:170]:  # 8.5 s: hidden for 10 frames
+        a.process(scan)
+    b = restarted(a)
+    assert b.point.detection_probability("cam") == a.point.detection_probability("cam")  # type: ignore[attr-defined]
+    assert a.point.detection_probability("cam") != TrackerConfig().track_management.pd  # type: ignore[attr-defined]
+    for scan in frames[170:]:
+        ra, rb = a.process(scan), b.process(scan)
+        assert rb.deleted == ra.deleted == ()
+        assert tracks_of(b) == tracks_of(a)
+    state = a.export_state()
+    values = {k: v for k, v in state.point.values.items() if k != "n_rates"}
+    older = _without(
+        PipelineState(
+            state.last_time, state.point_kind, StateSection(values, state.point.arrays), state.peers
+        ),
+        "rates.sensors.utf8",
+        "rates.sensors.len",
+        "rates.values",
+    )
+    q = TrackingPipeline()
+    q.import_state(older)
+    assert q.point.detection_probability("cam") == TrackerConfig().track_management.pd  # type: ignore[attr-defined]
+
+
 def test_the_saved_time_keeps_older_scans_out_of_sequence(scans: list[Scan]) -> None:
     a = TrackingPipeline()
     for s in scans[:10]:
@@ -351,6 +393,8 @@ SECTION_DEFECTS: list[tuple[str, dict[str, Any], str]] = [
     ("instants beyond the hits", {"tracks__instants": "more"}, "instants must be from 1"),
     ("a detection not yet numbered", {"tracks__took": "late"}, "next_serial"),
     ("a serial counter past its bound", {"values": {"next_serial": 2**63}}, "next_serial"),
+    ("more detections than looks", {"rates__values": "seen"}, "0 <= detected <= looks"),
+    ("a sensor heard after the time", {"rates__values": "late"}, "a time after the state's"),
 ]
 
 
@@ -387,6 +431,8 @@ def _defect(state: PipelineState, how: dict[str, Any]) -> PipelineState:
             v[0] = 1e9 if v.dtype.kind == "f" else 2**40
         elif spec == "more":
             v[0] = a["tracks.hits"][0] + 1
+        elif spec == "seen":
+            v[0, 2] = v[0, 1] + 1.0
         out[key] = v
     return changed(state, **out)
 
