@@ -118,7 +118,7 @@ COAST_MIN_INSTANTS = 5
 #: (``track_management.miss_correlation_time``): a target hidden behind a pillar is missed
 #: however likely the camera is to detect it when in sight, so a camera of low P_D does not
 #: let its tracks coast longer than one of P_D 0.9 (2 s at τ 0.3 s).
-_HIDDEN_MISS = math.log(0.1)
+_HIDDEN_MISS = float(miss_increment(0.9))
 
 #: A scan looks at a track when at least this share of its predicted position's distribution
 #: lies in the scan's coverage (:func:`_visible`; ``TrackArrays.looked``).
@@ -880,16 +880,17 @@ class IndividualTracker:
         assert ESTABLISHED_HITS == 3  # (a track knows the serials of its first and last only)
         took_third = (hits[at] == ESTABLISHED_HITS) & (tracks.hits[at] == ESTABLISHED_HITS - 1)
         took_third &= ~tracks.confirmed[at]
-        third = at[took_third]
-        earlier = np.stack([tracks.first[third], tracks.took[third]], axis=1)
         held = HeldDetections(
-            rows=ad[hold],
-            holders=tuple(tracks.ids[at[hold]].tolist()),
-            serials=serial + ad[hold],
-            earlier=earlier.ravel(),
-            earlier_holders=tuple(np.repeat(tracks.ids[third], 2).tolist()),
-            earlier_thirds=np.repeat(ad[took_third], 2),
+            rows=ad[hold], holders=tuple(tracks.ids[at[hold]].tolist()), serials=serial + ad[hold]
         )
+        if took_third.any():  # (at few scans: the arrays are built only then)
+            third = at[took_third]
+            held = replace(
+                held,
+                earlier=np.stack([tracks.first[third], tracks.took[third]], axis=1).ravel(),
+                earlier_holders=tuple(np.repeat(tracks.ids[third], 2).tolist()),
+                earlier_thirds=np.repeat(ad[took_third], 2),
+            )
         new = replace(
             tracks,
             x=x,
