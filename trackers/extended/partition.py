@@ -62,21 +62,27 @@ def close_pairs(Z: np.ndarray, d_res: float) -> tuple[np.ndarray, np.ndarray]:
     as two index arrays: every pair's distance for a few points, a k-d tree for more."""
     n = Z.shape[0]
     if n <= BRUTE_FORCE_POINTS:  # every pair: cheaper than a k-d tree for a few points
+        # (the pairs i < j listed once per n, so that no (n, n) matrix is searched: numpy's
+        # nonzero of a matrix costs more than the distances)
+        i, j = _upper_pairs(n)
         x, y = Z[:, 0], Z[:, 1]  # (columns: numpy reduces a length-2 axis slowly)
-        dx, dy = x[:, None] - x[None, :], y[:, None] - y[None, :]
-        close = dx * dx + dy * dy <= float(d_res) ** 2
-        close &= _upper_triangle(n)
-        return np.nonzero(close)
+        dx, dy = x.take(i) - x.take(j), y.take(i) - y.take(j)
+        dx *= dx
+        dy *= dy
+        dx += dy
+        close = np.flatnonzero(dx <= float(d_res) ** 2)
+        return i.take(close), j.take(close)
     pairs = cKDTree(Z).query_pairs(r=float(d_res), output_type="ndarray")
     return pairs[:, 0], pairs[:, 1]
 
 
 @functools.lru_cache(maxsize=BRUTE_FORCE_POINTS + 1)
-def _upper_triangle(n: int) -> np.ndarray:
-    """The (n, n) mask of the cells above the diagonal, ``i < j`` (read-only)."""
-    out = np.triu(np.ones((n, n), dtype=bool), 1)
-    out.flags.writeable = False
-    return out
+def _upper_pairs(n: int) -> tuple[np.ndarray, np.ndarray]:
+    """Every pair ``i < j`` of ``n`` points, row by row (read-only index arrays)."""
+    i, j = np.triu_indices(n, 1)
+    i, j = i.astype(np.intp), j.astype(np.intp)
+    i.flags.writeable = j.flags.writeable = False
+    return i, j
 
 
 def pair_subsets(n: int, i: np.ndarray, j: np.ndarray, min_size: int = 1) -> list[np.ndarray]:

@@ -617,6 +617,32 @@ class _PointGates:
         n_trk = np.bincount(self.trk, minlength=self.rows.size)
         return (np.take(n_det, self.det) == 1) & (np.take(n_trk, self.trk) == 1)
 
+    @cached_property
+    def explained_detections(self) -> np.ndarray:
+        """Mask of the scan's detections in a gate pair the tracks explain one to one,
+        ``detections(explained)``, without :attr:`_sets`' per-pair arrays when nothing else
+        needed them: a pair whose detection and track are in no other pair is explained, and
+        the sets of the few others are grouped by one loop."""
+        det, trk = self.det, self.trk
+        if "_sets" in self.__dict__ or det.size > UNION_FIND_EDGES:
+            return self.detections(self.explained)
+        out = np.zeros(self.size, dtype=bool)
+        if det.size == 0:
+            return out
+        shared = (np.bincount(det, minlength=self.size)[det] > 1) | (
+            np.bincount(trk, minlength=self.rows.size)[trk] > 1
+        )
+        out[det[~shared]] = True  # a pair in no set with another: one to one
+        at = np.flatnonzero(shared)
+        if at.size:
+            n_d = self.size  # nodes: the detections, then n_d + the tracks
+            k_list = [n_d + k for k in np.take(trk, at).tolist()]
+            for group in edge_groups(np.take(det, at).tolist(), k_list):
+                dets = [node for node in group if node < n_d]
+                if len(dets) <= 2 and len(group) - len(dets) >= len(dets):
+                    out[dets] = True
+        return out
+
     def detections(self, pairs: np.ndarray) -> np.ndarray:
         """Mask of the scan's detections in the gate ``pairs`` (a mask over the pairs)."""
         out = np.zeros(self.size, dtype=bool)
@@ -1306,7 +1332,7 @@ def _less_explained(clusters: list[np.ndarray], pg: _PointGates) -> list[np.ndar
     ``pg`` explain one to one (:attr:`_PointGates.explained`)."""
     if pg.det.size == 0:
         return clusters
-    theirs = pg.detections(pg.explained)
+    theirs = pg.explained_detections
     return [rows[~theirs[rows]] for rows in clusters]
 
 

@@ -382,12 +382,38 @@ def test_gate_sets_tell_targets_explained_one_to_one_from_an_objects_returns():
         dtype=float,
     )
     z = np.vstack([z, [[4002, 15.0]]])
-    pg = _PointGates(view, Scan("s", 0.0, z, np.tile(R, (len(z), 1, 1))))
+    scan = Scan("s", 0.0, z, np.tile(R, (len(z), 1, 1)))
+    pg = _PointGates(view, scan)
+    want = [True, True, True, False, False, False, False, False, False]
+    # (the births' mask of explained detections, found before and without the sets' arrays)
+    assert _PointGates(view, scan).explained_detections.tolist() == want
     explained = np.zeros(len(z), dtype=bool)
     explained[pg.det[pg.explained]] = True
-    assert explained.tolist() == [True, True, True, False, False, False, False, False, False]
+    assert explained.tolist() == want
+    assert pg.explained_detections.tolist() == want  # (and from them, once they are made)
     # (a track with no detection in its gate is not: a coasting member may be absorbed)
     assert pg.explained_tracks.tolist() == [True, True, True, False, False, False, False, False]
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_explained_detections_are_those_of_the_explained_gate_pairs(seed):
+    """Crowded random scenes (tracks and detections a gate or two apart, so that many gate
+    pairs share a track or a detection): the births' mask of explained detections is the
+    detections of the pairs :attr:`_PointGates.explained` marks."""
+    from trackers.extended.tracker import _PointGates
+
+    rng = np.random.default_rng(seed)
+    xy = rng.uniform(0, 400, (40, 2))
+    view = _view_of(xy, np.zeros((40, 2)), rng.uniform(size=40) < 0.8)
+    z = np.vstack([xy[:30] + rng.normal(0, 10, (30, 2)), rng.uniform(0, 400, (30, 2))])
+    scan = Scan("s", 0.0, z, np.tile(R, (len(z), 1, 1)))
+    pg = _PointGates(view, scan)
+    fast = _PointGates(view, scan).explained_detections
+    want = np.zeros(len(z), dtype=bool)
+    want[pg.det[pg.explained]] = True
+    assert fast.tolist() == want.tolist()
+    assert 0 < want.sum() < len(z)
+    assert (np.bincount(pg.det) > 1).any()  # sets of more than one pair were in it
 
 
 def test_a_birth_leaves_targets_being_acquired_their_detections():
