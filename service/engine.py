@@ -312,9 +312,9 @@ class Engine:
         if stuck:
             log.warning("tracker worker did not stop within %.1f s", timeout)
         self._thread = None
-        if self._state_store is not None:  # the state after the last batch processed
-            self._state_store.stop()
-            self._state_store.save_logged(self._checkpoint)
+        if self._state_store is not None:  # the state after the last batch processed,
+            self._state_store.stop()  # saved now even if saved before: stopped at this time
+            self._state_store.save_logged(self._checkpoint, force=True)
         if self._ids is not None and not stuck:  # (a worker still running may number more)
             self._ids.end(self._pipeline)
 
@@ -335,7 +335,7 @@ class Engine:
         if result is not None:
             confirmed = [track_to_dict(t) for t in result.confirmed()]
             self._state = ReportState.of(report_dict(self._seq, result, 0.0, confirmed), result)
-            self.stats.restored(self._seq, result.time, len(confirmed))
+            self.stats.restored(self._seq, result.time, len(confirmed), restored.since_last_batch)
         self._checkpoint = EngineCheckpoint(
             self._seq, self._pipeline.checkpoint(), restored.sensor_id, self._last_wall
         )
@@ -1095,7 +1095,9 @@ class Engine:
             self._checkpoint = EngineCheckpoint(
                 seq, pipeline.checkpoint(), result.sensor_id, self._last_wall, self._resets
             )
-        self.stats.processed(seq, result.time, len(batch.detections), ms, len(confirmed))
+        self.stats.processed(
+            seq, result.time, len(batch.detections), ms, len(confirmed), batch.sensor_id
+        )
         self._out.tracks(state.data)
         self.view.publish(state, scan.z)
         item.future.set_result(IngestResult(True, seq))

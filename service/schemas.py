@@ -43,6 +43,7 @@ __all__ = [
     "MAX_ABS_SPEED",
     "MAX_ID_LENGTH",
     "MAX_SEMI_AXIS",
+    "MAX_SENSOR_SERIES",
     "SENSOR_ID_PATTERN",
     "TRACK_KINDS",
     "BatchError",
@@ -58,6 +59,7 @@ __all__ = [
     "IngestConfig",
     "PatternTrackIn",
     "ProcessingTimesOut",
+    "SensorStatsOut",
     "StatsOut",
     "TrackOut",
     "TrackReportOut",
@@ -752,11 +754,34 @@ class ProcessingTimesOut(BaseModel):
     window: int = Field(description="how many of the last batches these are over (<= 2048)")
 
 
+#: The sensors whose last batch ``/api/v1/stats`` and ``/metrics`` show: the most recently
+#: heard, so that a stream of one-off sensor ids cannot grow them without bound.
+MAX_SENSOR_SERIES = 64
+
+
+class SensorStatsOut(BaseModel):
+    sensor_id: str
+    seconds_since_last_batch: float = Field(
+        description="wall-clock seconds since this sensor's last batch was processed"
+    )
+    last_time: float = Field(description="the time stamp of that batch")
+    batches: int = Field(description="its batches processed since start-up")
+
+
 class StatsOut(BaseModel):
     instance_id: str
     uptime_s: float
     seq: int
     last_time: float | None
+    seconds_since_last_batch: float | None = Field(
+        description=(
+            "wall-clock seconds since the last batch was processed (null: none since start-up "
+            "and none restored); the tracks are as of that batch"
+        )
+    )
+    sensors: list[SensorStatsOut] = Field(
+        description=(f"the {MAX_SENSOR_SERIES} most recently heard sensors, the most recent first")
+    )
     batches_received: int
     batches_processed: int
     batches_rejected: int

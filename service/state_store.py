@@ -4,8 +4,11 @@ The engine's worker takes a :class:`EngineCheckpoint` after every processed batc
 attribute reads: the trackers' states are immutable). :class:`StateStore` turns the latest
 one into plain data and bytes (:mod:`trackers.state`) and writes it atomically
 (:func:`service.files.atomic_write`), on its own thread every ``save_interval`` seconds and
-once more when the engine stops, never on the worker's time. A save is skipped when no batch
-was processed since the last save (or the restore).
+once more when the engine stops, never on the worker's time. A periodic save is skipped when
+no batch was processed since the last save (or the restore); the save at the stop is not, so
+that the file says when the service stopped and ``max_age`` counts the time it was down, not
+a quiet spell of the sensors before the stop (the tracks' wall-clock age since their last
+batch is kept too, for the time-jump guard).
 
 At start, :meth:`StateStore.restore_into` removes the temporary files interrupted saves left,
 reads the file, refuses it when it is not a state file of this version, when it was saved
@@ -222,12 +225,16 @@ class StateStore:
 
     # -- saving ---------------------------------------------------------------------------
 
-    def save(self, checkpoint: EngineCheckpoint | None) -> SaveFigures | None:
-        """Write ``checkpoint`` unless it is ``None`` or already saved (or restored). Raises
-        ``OSError`` or :class:`~trackers.state.StateError` when it cannot; the old file is
-        then left as it was."""
+    def save(
+        self, checkpoint: EngineCheckpoint | None, *, force: bool = False
+    ) -> SaveFigures | None:
+        """Write ``checkpoint`` unless it is ``None`` or, without ``force``, already saved (or
+        restored). Raises ``OSError`` or :class:`~trackers.state.StateError` when it cannot;
+        the old file is then left as it was."""
         with self._save_lock:
-            if checkpoint is None or (checkpoint.seq, checkpoint.resets) == self._saved:
+            if checkpoint is None:
+                return None
+            if not force and (checkpoint.seq, checkpoint.resets) == self._saved:
                 return None
             t0 = time.perf_counter()
             state = checkpoint.pipeline.export()
@@ -264,10 +271,12 @@ class StateStore:
         )
         return figures
 
-    def save_logged(self, checkpoint: EngineCheckpoint | None) -> SaveFigures | None:
+    def save_logged(
+        self, checkpoint: EngineCheckpoint | None, *, force: bool = False
+    ) -> SaveFigures | None:
         """:meth:`save`, a failure logged instead of raised."""
         try:
-            return self.save(checkpoint)
+            return self.save(checkpoint, force=force)
         except (OSError, StateError) as exc:
             log.warning("could not save the tracker state to %s: %s", self.path, exc)
         except Exception:  # a bug must not stop the saver or the engine's shutdown

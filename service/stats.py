@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import threading
 import time
-from collections import deque
+from collections import OrderedDict, deque
 from collections.abc import Callable
 from typing import Any
 
@@ -30,9 +30,9 @@ from prometheus_client import (
     generate_latest,
 )
 
-from service.schemas import ERROR_REASONS
+from service.schemas import ERROR_REASONS, MAX_SENSOR_SERIES
 
-__all__ = ["BATCH_SIZE_BUCKETS", "PROCESSING_BUCKETS", "WINDOW", "Stats"]
+__all__ = ["BATCH_SIZE_BUCKETS", "MAX_SENSOR_SERIES", "PROCESSING_BUCKETS", "WINDOW", "Stats"]
 
 disable_created_metrics()
 
@@ -83,6 +83,10 @@ class Stats:
         self.tracks_confirmed = 0
         self._times: deque[float] = deque(maxlen=WINDOW)
         self._lock = threading.Lock()  # the window and the last batch's figures
+        #: wall-clock (Unix) time the last batch was processed, or that a restored state's
+        #: last batch was; and each recently heard sensor's [that time, batch time, batches]
+        self._last_batch_wall: float | None = None
+        self._sensors: OrderedDict[str, list[float]] = OrderedDict()
 
         r = self.registry = CollectorRegistry(auto_describe=True)
         Info("tracker", "Constant 1, labelled with this instance's id.", registry=r).info(
@@ -150,6 +154,19 @@ class Stats:
             "Live view frames replaced by a newer one before their viewer took them.",
             registry=r,
         )
+        Gauge(
+            "tracker_last_batch_timestamp_seconds",
+            "Unix time the last detection batch was processed (0: none yet). A feed gone "
+            "quiet shows as time() minus this growing: the tracks then are as of that batch.",
+            registry=r,
+        ).set_function(lambda: self._last_batch_wall or 0.0)
+        self._sensor_last = Gauge(
+            "tracker_sensor_last_batch_timestamp_seconds",
+            f"Unix time each sensor's last batch was processed (the {MAX_SENSOR_SERIES} most "
+            "recently heard sensors).",
+            ["sensor_id"],
+            registry=r,
+        )
         self._processing = Histogram(
             "tracker_processing_seconds",
             "Tracker time per processed batch.",
@@ -188,23 +205,43 @@ class Stats:
         n_detections: int,
         processing_ms: float,
         confirmed: int,
+        sensor_id: str | None = None,
     ) -> None:
         self._processed.inc()
         self._detections_processed.inc(n_detections)
         self._processing.observe(processing_ms / 1000.0)
         self._batch_size.observe(n_detections)
+        wall = time.time()
+        gone: list[str] = []
         with self._lock:
             self.seq = seq
             self.last_time = time_
             self.tracks_confirmed = confirmed
             self._times.append(processing_ms)
+            self._last_batch_wall = wall
+            if sensor_id is not None:
+                entry = self._sensors.pop(sensor_id, None)
+                self._sensors[sensor_id] = [wall, time_, (entry[2] if entry else 0) + 1]
+                while len(self._sensors) > MAX_SENSOR_SERIES:
+                    gone.append(self._sensors.popitem(last=False)[0])
+            # (the gauge's series change under the lock too: a sensor evicted by one batch
+            # and heard again in the next keeps its series)
+            for old in gone:
+                self._sensor_last.remove(old)
+            if sensor_id is not None:
+                self._sensor_last.labels(sensor_id=sensor_id).set(wall)
 
-    def restored(self, seq: int, time_: float, confirmed: int) -> None:
-        """The report counter, time and confirmed tracks of a state restored at start."""
+    def restored(
+        self, seq: int, time_: float, confirmed: int, since_last_batch: float | None = None
+    ) -> None:
+        """The report counter, time and confirmed tracks of a state restored at start, and
+        the wall-clock seconds since its last batch was processed."""
         with self._lock:
             self.seq = seq
             self.last_time = time_
             self.tracks_confirmed = confirmed
+            if since_last_batch is not None:
+                self._last_batch_wall = time.time() - since_last_batch
 
     # -- reading --------------------------------------------------------------------------
 
@@ -233,13 +270,28 @@ class Stats:
         for sample in self._rejected.collect()[0].samples:
             if sample.name.endswith("_total") and sample.value:
                 rejected[sample.labels["reason"]] = int(sample.value)
+        now = time.time()
         with self._lock:
             seq, last_time, confirmed = self.seq, self.last_time, self.tracks_confirmed
+            last_wall = self._last_batch_wall
+            sensors = [
+                {
+                    "sensor_id": sensor_id,
+                    "seconds_since_last_batch": round(max(now - wall, 0.0), 3),
+                    "last_time": t,
+                    "batches": int(n),
+                }
+                for sensor_id, (wall, t, n) in reversed(self._sensors.items())
+            ]
         return {
             "instance_id": self.instance_id,
             "uptime_s": round(self.uptime(), 3),
             "seq": seq,
             "last_time": last_time,
+            "seconds_since_last_batch": (
+                None if last_wall is None else round(max(now - last_wall, 0.0), 3)
+            ),
+            "sensors": sensors,
             "batches_received": _count(self._received),
             "batches_processed": _count(self._processed),
             "batches_rejected": sum(rejected.values()),

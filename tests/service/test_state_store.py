@@ -11,6 +11,7 @@ import sys
 import textwrap
 import time
 from collections.abc import Callable, Iterator
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -224,6 +225,33 @@ def test_a_restored_engine_keeps_time_order_and_the_time_jump_guard(
     assert on.accepted and on.seq == 21
     far = run_batches(later, [batch_payload(scans[21], time=scans[19].time + 1000.0)])[0]
     assert far.error is not None and far.error["error"] == "time_jump"
+
+
+def test_a_stop_after_a_quiet_spell_saves_the_time_it_stopped(
+    tmp_path: Path, scans: list[Any], engines: Engines
+) -> None:
+    """Sensors quiet for 400 s (longer than state_max_age), then a stop and a restart 10 s
+    later: the file says when the service stopped, so the tracks are restored; the time-jump
+    guard counts the quiet spell, so the sensors' next batch 410 s on is taken."""
+    path = tmp_path / "state.npz"
+    wall = [0.0]
+    ingest = IngestConfig(max_time_jump=10.0)
+    first = engines(path, ingest=ingest, max_age=300.0, wall_clock=lambda: time.time() + wall[0])
+    run_batches(first, [batch_payload(s) for s in scans[:20]])
+    store = first._state_store
+    assert store is not None and store.save(first._checkpoint) is not None  # a periodic save
+    assert store.save(first._checkpoint) is None  # nothing new since: skipped
+    wall[0] = 400.0  # the sensors fall quiet for 400 s; then the service is stopped
+    first._checkpoint = replace(first._checkpoint, processed_at=time.monotonic() - 400.0)
+    tracks = first.latest_report()["tracks"]
+    first.stop()
+    meta = decode_state(path.read_bytes())[1]
+    assert meta["seq"] == 20 and meta["since_last_batch"] >= 400.0
+
+    later = engines(path, ingest=ingest, max_age=300.0, wall_clock=lambda: time.time() + 410.0)
+    assert later.seq == 20 and later.latest_report()["tracks"] == tracks and tracks
+    on = run_batches(later, [batch_payload(scans[20], time=scans[19].time + 410.0)])[0]
+    assert on.accepted and on.seq == 21
 
 
 def test_states_that_are_not_restored_say_why(

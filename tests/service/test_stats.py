@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from service.schemas import ERROR_REASONS
+from service.schemas import ERROR_REASONS, MAX_SENSOR_SERIES
 from service.stats import BATCH_SIZE_BUCKETS, PROCESSING_BUCKETS, WINDOW, Stats
 
 from .helpers import parse_prometheus
@@ -95,3 +95,58 @@ def test_each_instance_counts_apart() -> None:
     assert b.snapshot()["batches_received"] == 0 and b.snapshot()["batches_processed"] == 0
     assert parse_prometheus(b.prometheus().decode())["tracker_batches_received_total"] == 0
     assert parse_prometheus(a.prometheus().decode())["tracker_batches_received_total"] == 1
+
+
+def test_a_quiet_feed_shows_as_time_since_the_last_batch_of_each_sensor(monkeypatch) -> None:
+    """Seconds since the last batch, overall and per sensor (the most recently heard
+    MAX_SENSOR_SERIES, the most recent first), in the JSON and as Unix times in /metrics; a
+    sensor pushed out has no series left, and a restored state's last batch counts."""
+    import service.stats as module
+
+    now = [1_000_000.0]
+    monkeypatch.setattr(module.time, "time", lambda: now[0])
+    stats = Stats("x")
+    snap = stats.snapshot()
+    assert snap["seconds_since_last_batch"] is None and snap["sensors"] == []
+    assert (
+        parse_prometheus(stats.prometheus().decode())["tracker_last_batch_timestamp_seconds"] == 0
+    )
+    stats.processed(1, 10.0, 5, 1.0, 2, "radar-a")
+    now[0] += 4.0
+    stats.processed(2, 12.0, 5, 1.0, 2, "radar-b")
+    stats.processed(3, 13.0, 5, 1.0, 2, "radar-b")
+    now[0] += 300.0  # the feeds fall quiet
+    snap = stats.snapshot()
+    assert snap["seconds_since_last_batch"] == 300.0
+    assert snap["sensors"] == [
+        {
+            "sensor_id": "radar-b",
+            "seconds_since_last_batch": 300.0,
+            "last_time": 13.0,
+            "batches": 2,
+        },
+        {
+            "sensor_id": "radar-a",
+            "seconds_since_last_batch": 304.0,
+            "last_time": 10.0,
+            "batches": 1,
+        },
+    ]
+    samples = parse_prometheus(stats.prometheus().decode())
+    assert samples["tracker_last_batch_timestamp_seconds"] == 1_000_004.0
+    assert samples['tracker_sensor_last_batch_timestamp_seconds{sensor_id="radar-a"}'] == 1e6
+    for i in range(MAX_SENSOR_SERIES):  # one-off sensors push the old ones out
+        stats.processed(4 + i, 20.0, 1, 1.0, 2, f"cam-{i}")
+    snap = stats.snapshot()
+    assert len(snap["sensors"]) == MAX_SENSOR_SERIES
+    assert snap["sensors"][0]["sensor_id"] == f"cam-{MAX_SENSOR_SERIES - 1}"
+    series = [
+        k
+        for k in parse_prometheus(stats.prometheus().decode())
+        if k.startswith("tracker_sensor_last_batch_timestamp_seconds{")
+    ]
+    assert len(series) == MAX_SENSOR_SERIES and not [k for k in series if "radar-" in k]
+
+    restored = Stats("y")
+    restored.restored(40, 99.0, 3, since_last_batch=120.0)
+    assert restored.snapshot()["seconds_since_last_batch"] == 120.0
