@@ -77,6 +77,7 @@ import numpy as np
 from trackers.association.gating import position_noise
 
 __all__ = [
+    "AROUND_CELLS",
     "CELL_SIGMAS",
     "COUNTED_BATCHES",
     "COUNTED_POINTS",
@@ -326,6 +327,20 @@ def _around(key: int) -> np.ndarray:
 _NEIGHBOURS = np.array([dx * _STRIDE + dy for dx in (-1, 0, 1) for dy in (-1, 0, 1)])
 
 
+#: The block of cells about a position whose density :meth:`ClutterMap.around` reads: the
+#: (2k + 1)² cells centred on its own, k = AROUND_CELLS (7 x 7 cells, 140 position standard
+#: deviations across).
+AROUND_CELLS = 3
+_BLOCK = np.array(
+    [
+        dx * _STRIDE + dy
+        for dx in range(-AROUND_CELLS, AROUND_CELLS + 1)
+        for dy in range(-AROUND_CELLS, AROUND_CELLS + 1)
+    ],
+    dtype=np.int64,
+)
+
+
 def _block_seen(grid: _Grid, key: int) -> float:
     """The decayed count of all detections in cell ``key`` and the eight around it now."""
     rows, found = grid.find(_around(key))
@@ -494,6 +509,34 @@ class ClutterMap:
             counts[found] = grid.decayed(rows[found])
         lam = (alpha0 + counts) / ((PRIOR_SCANS + grid.exposure()) * area)
         return np.maximum(lam, prior * PRIOR_SCANS / (PRIOR_SCANS + MEMORY_SCANS)), rate
+
+    def around(self, sensor_id: str, z: np.ndarray, prior: float) -> np.ndarray:
+        """``λ̄`` (per m²) about each of the positions ``z (m, 2)``: the density of the block
+        of ``B`` = (2k + 1)² cells centred on its cell (k = :data:`AROUND_CELLS`), with the
+        cells' prior (:meth:`read`):
+
+            λ̄ = max((α₀ B + Σ_b c_b) / ((β₀ + E) B A), λ_c β₀ / (β₀ + MEMORY_SCANS)),
+
+        ``c_b`` the decayed counts of the block's cells. The clutter a group of detections
+        must stand out from: a patch of backwash a few cells wide is many times denser than
+        the block about it, a cluster of sea clutter near a coastal radar is not (the scene's
+        density, over tens of kilometres, is a hundred times lower there). ``prior`` for a
+        sensor not seen."""
+        z = np.asarray(z, dtype=float).reshape(-1, 2)
+        grid = self._grids.get(sensor_id)
+        if grid is None or grid.scans == 0 or z.shape[0] == 0:
+            return np.full(z.shape[0], prior)
+        rate = grid.scene_rate(prior)
+        area = grid.cell * grid.cell * _BLOCK.size
+        lam0 = prior if rate is None else min(SCENE_MARGIN * rate, prior)
+        keys = (grid.cells(z)[:, None] + _BLOCK[None, :]).ravel()
+        rows, found = grid.find(keys)
+        counts = np.zeros(keys.size)
+        if found.any():
+            counts[found] = grid.decayed(rows[found])
+        sums = counts.reshape(z.shape[0], _BLOCK.size).sum(axis=1)
+        lam = (lam0 * area * PRIOR_SCANS + sums) / ((PRIOR_SCANS + grid.exposure()) * area)
+        return np.maximum(lam, prior * PRIOR_SCANS / (PRIOR_SCANS + MEMORY_SCANS))
 
     def learn(
         self,

@@ -16,6 +16,7 @@ The point tracker is chosen by ``association.method`` (:data:`POINT_TRACKERS`) o
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import replace
@@ -479,6 +480,9 @@ class TrackingPipeline:
         if mapped:
             learned["clutter_map"], learned["clutter_scene"] = self._clutter.read(
                 scan.sensor_id, scan.z, tm.clutter_density
+            )
+            learned["clutter_around"] = functools.partial(
+                self._clutter.around, scan.sensor_id, prior=tm.clutter_density
             )
         if learned:
             scan = replace(scan, **learned)

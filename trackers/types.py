@@ -53,6 +53,9 @@ class Scan:
     clutter_scene : the false-alarm density per m² of the sensor's whole scene, learned by the
         same map for such a scan (or ``None``): how far apart its false alarms lie on average
         anywhere it looks, what a cluster of detections must beat to be a group.
+    clutter_around : for such a scan, the false-alarm density per m² the same map learned
+        about given positions ``(m, 2) -> (m,)`` (:meth:`~trackers.clutter.ClutterMap.around`:
+        a block of cells a few kilometres across for a radar), as of this step (or ``None``).
     coverage : the area the sensor looked at (:class:`~trackers.coverage.Coverage`): a track
         outside it is not counted as missed. ``None``: everywhere, or, when several sensors
         report, where this one has been seeing things (the pipeline's learned coverage).
@@ -74,6 +77,7 @@ class Scan:
     coverage: Coverage | None = None
     clutter_map: np.ndarray | None = None
     clutter_scene: float | None = None
+    clutter_around: Callable[[np.ndarray], np.ndarray] | None = None
 
     def __post_init__(self) -> None:
         z = np.asarray(self.z, dtype=float).reshape(-1, 2)
@@ -141,6 +145,7 @@ class Scan:
             coverage=self.coverage,
             clutter_map=None if self.clutter_map is None else self.clutter_map[idx],
             clutter_scene=self.clutter_scene,
+            clutter_around=self.clutter_around,
         )
 
 

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from trackers.clutter import (
+    AROUND_CELLS,
     CELL_SIGMAS,
     MEMORY_SCANS,
     PRIOR_SCANS,
@@ -44,6 +45,24 @@ def test_worked_example_of_one_scan() -> None:
     assert lam[0] == pytest.approx((alpha0 + 4.0) / ((PRIOR_SCANS + 1.0) * area))
     # an empty cell after one scan: the prior's share, alpha0 / ((beta0 + 1) A)
     assert lam[1] == pytest.approx(alpha0 / ((PRIOR_SCANS + 1.0) * area))
+
+
+def test_worked_example_of_the_density_about_a_point() -> None:
+    """The block of 7 x 7 cells about a point: the counts of all its cells over its area, with
+    the cells' prior; a point whose block leaves the counted cell out reads the prior alone."""
+    m = ClutterMap()
+    clutter = np.array([[10.0, 10.0], [50.0, 150.0], [190.0, 5.0], [100.0, 100.0]])
+    m.learn("r", clutter, _R(4))
+    cells = (2 * AROUND_CELLS + 1) ** 2
+    area = cells * 200.0**2
+    alpha0 = PRIOR * area * PRIOR_SCANS
+    z = np.array([[120.0, 30.0], [650.0, -550.0], [850.0, 30.0]])  # cell 0; 3 away; 4 away
+    lam = m.around("r", z, PRIOR)
+    assert lam[0] == pytest.approx((alpha0 + 4.0) / ((PRIOR_SCANS + 1.0) * area))
+    assert lam[1] == lam[0]
+    assert lam[2] == pytest.approx(alpha0 / ((PRIOR_SCANS + 1.0) * area))
+    assert lam[0] < m.density("r", z[:1], PRIOR)[0]  # the cell's own, 49 times less spread
+    np.testing.assert_array_equal(ClutterMap().around("r", z, PRIOR), [PRIOR] * 3)
 
 
 def test_counts_are_forgotten_and_the_density_is_floored() -> None:

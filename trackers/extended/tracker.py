@@ -845,8 +845,9 @@ class ExtendedTracker(SavesImmutableState):
         noise = remembered_noise(state.noise, scan.sensor_id, sigma, t)
         cfg = resolution_in_force(cfg, max((e[1] for e in noise), default=None))
         # the false-alarm density a track's detections must beat: the batch's stated one,
-        # else the one its sensor's clutter map learned for the whole scene (what a cluster
-        # must beat to start a track, :func:`_standing_out`), else the configured one
+        # else the one its sensor's clutter map learned for the whole scene or, where it is
+        # denser, about the track's centroid (what a cluster must beat to start a track,
+        # :func:`_standing_out`), else the configured one
         lam = scan.clutter_density if scan.clutter_density is not None else scan.clutter_scene
         log_lam = math.log(tm.clutter_density if lam is None else float(lam))
         next_id = state.next_id
@@ -866,6 +867,10 @@ class ExtendedTracker(SavesImmutableState):
         spawned: list[ExtendedTrack] = []
         deleted: list[str] = []
         ests = [predict(tr.estimate, max(0.0, t - tr.time), cfg.q, cfg.tau) for tr in state.tracks]
+        log_lams = [log_lam] * len(ests)
+        if ests and scan.clutter_density is None and scan.clutter_around is not None:
+            about = scan.clutter_around(np.array([e.x[:2] for e in ests], dtype=float))
+            log_lams = [max(log_lam, math.log(a)) for a in about.tolist()]
         owner = _owners(ests, scan, tree, R_mean, cfg) if tree is not None else None
         for idx, track in enumerate(state.tracks):
             est = ests[idx]
@@ -887,7 +892,7 @@ class ExtendedTracker(SavesImmutableState):
                     est, scan, tree, R_mean, taken, point_gates, cfg, track
                 )
             gain, chosen, parts, left_out, fitted = _likeliest(
-                track, est, scan, subsets, points, cfg, log_lam, inside
+                track, est, scan, subsets, points, cfg, log_lams[idx], inside
             )
             score = track.score + gain
             evidence, split, split_c, split_d, split_v = _split_evidence(
@@ -1049,7 +1054,11 @@ class ExtendedTracker(SavesImmutableState):
         if subsets:
             stated = scan.clutter_density
             subsets = _standing_out(
-                subsets, scan, scan.clutter_scene if stated is None else float(stated), sigma
+                subsets,
+                scan,
+                scan.clutter_scene if stated is None else float(stated),
+                sigma,
+                around=scan.clutter_around if stated is None else None,
             )
         clusters = subsets
         centroids = _centroids(scan, clusters)
@@ -1288,7 +1297,11 @@ def _among_individuals(
 
 
 def _standing_out(
-    clusters: list[np.ndarray], scan: Scan, clutter: float | None, sigma: float
+    clusters: list[np.ndarray],
+    scan: Scan,
+    clutter: float | None,
+    sigma: float,
+    around: Callable[[np.ndarray], np.ndarray] | None = None,
 ) -> list[np.ndarray]:
     """The clusters (rows of the scan) that stand out from the clutter about them: those of
     ``n`` detections with
@@ -1300,13 +1313,16 @@ def _standing_out(
     rectangle, whatever its heading), grown by two standard deviations ``sigma`` of the
     scan's position noise on each side (all clusters at once), ``λ`` the false-alarm
     density ``clutter`` (the scan's stated one, or its sensor's whole scene's as the clutter
-    map learned it; ``None``: every cluster) and ``c`` = :data:`GROUP_CONTRAST`. Chained at
+    map learned it, or, where denser, the map's density ``around`` the cluster's centroid
+    when given; ``None``: every cluster) and ``c`` = :data:`GROUP_CONTRAST`. Chained at
     the resolution distance, false alarms spread evenly over a sensor's small scene are one
     cluster as dense as the scene itself (a radar over a 400 m road junction, 2-80 false
     alarms a scan, no density stated: one extended track took the square and its targets); a
     ship's returns, a convoy, a patch of backwash are many times denser than the clutter about
     them (a lone ship's returns, which the map counts before its tracks hold them, about four
-    times)."""
+    times). Sea clutter near a coastal radar (a thousand false alarms a scan within 6 km, few
+    beyond) is a hundred times denser than the radar's whole scene, and clusters of it started
+    group tracks that fed on it; the block of cells about them is as dense as they are."""
     if clutter is None or not clutter > 0:
         return clusters
     sizes = [rows.size for rows in clusters]
@@ -1323,7 +1339,8 @@ def _standing_out(
     half, root = 0.5 * (sxx + syy), np.hypot(0.5 * (sxx - syy), sxy)
     w = np.sqrt(12.0 * (half + root)) + 4.0 * sigma
     h = np.sqrt(12.0 * np.maximum(half - root, 0.0)) + 4.0 * sigma
-    expected = GROUP_CONTRAST * clutter * w * h
+    lam = clutter if around is None else np.maximum(clutter, around(np.column_stack([mx, my])))
+    expected = GROUP_CONTRAST * lam * w * h
     return [rows for rows, e in zip(clusters, expected.tolist(), strict=True) if rows.size >= e]
 
 

@@ -586,6 +586,34 @@ def test_only_clusters_standing_out_from_the_clutter_make_runs():
     edge = 3.0 / (3.0 * line) * 0.999
     assert len(_standing_out([np.arange(3)], turned, edge, 2.0)) == 1
     assert len(_standing_out([np.arange(3)], scan, edge, 2.0)) == 1
+    # the density about each cluster, where denser than the one given: the line is no group
+    # in clutter as dense as itself around it
+    here = lambda p: np.where(p[:, 0] < 500.0, 0.5, 1e-6)  # noqa: E731
+    assert _standing_out(rows, scan, 1e-6, 2.0, around=here) == [rows[1]]
+
+
+def _sea_clutter_run(scans: int = 60) -> tuple[int, int]:
+    """A radar every 2.5 s (10 m noise) with 400 false alarms a scan within 3 km and 30
+    over 40 km x 40 km, no density stated and no target: the extended tracks confirmed, and
+    the confirmed tracks of any kind, in the last scan."""
+    rng = np.random.default_rng(4)
+    pipe = TrackingPipeline.all_kinds(TrackerConfig())
+    for k in range(scans):
+        r, a = 3e3 * np.sqrt(rng.uniform(size=400)), rng.uniform(-np.pi, np.pi, 400)
+        z = np.vstack(
+            [np.column_stack([r * np.cos(a), r * np.sin(a)]), rng.uniform(-2e4, 2e4, (30, 2))]
+        )
+        res = pipe.process(Scan("r", 2.5 * k, z, np.tile(np.eye(2) * 100.0, (len(z), 1, 1))))
+    confirmed = res.confirmed()
+    return sum(t.kind == "extended" for t in confirmed), len(confirmed)
+
+
+def test_sea_clutter_near_a_radar_starts_no_group_tracks():
+    """The clutter 3 km about the radar is 60 times denser than its whole scene: weighed
+    against the scene, clusters of it started extended tracks that fed on it (7 confirmed
+    at the end of this run); against the clutter map's density about them, none."""
+    extended, confirmed = _sea_clutter_run()
+    assert extended == 0 and confirmed == 0
 
 
 def _walkers(seed: int, T: float = 0.1, duration: float = 25.0):
