@@ -755,7 +755,8 @@ class ProcessingTimesOut(BaseModel):
 
 
 #: The sensors whose last batch ``/api/v1/stats`` and ``/metrics`` show: the most recently
-#: heard, so that a stream of one-off sensor ids cannot grow them without bound.
+#: heard, those with 10 batches or more kept over newer one-off ids, so that a stream of
+#: one-off sensor ids can neither grow them without bound nor push out a radar gone quiet.
 MAX_SENSOR_SERIES = 64
 
 
@@ -765,7 +766,7 @@ class SensorStatsOut(BaseModel):
         description="wall-clock seconds since this sensor's last batch was processed"
     )
     last_time: float = Field(description="the time stamp of that batch")
-    batches: int = Field(description="its batches processed since start-up")
+    batches: int = Field(description="its batches processed since it was last listed here")
 
 
 class StatsOut(BaseModel):
@@ -780,7 +781,10 @@ class StatsOut(BaseModel):
         )
     )
     sensors: list[SensorStatsOut] = Field(
-        description=(f"the {MAX_SENSOR_SERIES} most recently heard sensors, the most recent first")
+        description=(
+            f"the {MAX_SENSOR_SERIES} most recently heard sensors, the most recent first "
+            "(those with 10 batches or more kept over newer one-off ids)"
+        )
     )
     batches_received: int
     batches_processed: int

@@ -32,9 +32,20 @@ from prometheus_client import (
 
 from service.schemas import ERROR_REASONS, MAX_SENSOR_SERIES
 
-__all__ = ["BATCH_SIZE_BUCKETS", "MAX_SENSOR_SERIES", "PROCESSING_BUCKETS", "WINDOW", "Stats"]
+__all__ = [
+    "BATCH_SIZE_BUCKETS",
+    "MAX_SENSOR_SERIES",
+    "PROCESSING_BUCKETS",
+    "SETTLED_BATCHES",
+    "WINDOW",
+    "Stats",
+]
 
 disable_created_metrics()
+
+#: A sensor with this many batches processed is kept in the table of recently heard sensors
+#: over those with fewer (:meth:`Stats._evicted`).
+SETTLED_BATCHES = 10
 
 #: How many of the latest batches the JSON's processing-time percentiles are over.
 WINDOW = 2048
@@ -223,13 +234,24 @@ class Stats:
                 entry = self._sensors.pop(sensor_id, None)
                 self._sensors[sensor_id] = [wall, time_, (entry[2] if entry else 0) + 1]
                 while len(self._sensors) > MAX_SENSOR_SERIES:
-                    gone.append(self._sensors.popitem(last=False)[0])
+                    gone.append(self._evicted(sensor_id))
             # (the gauge's series change under the lock too: a sensor evicted by one batch
             # and heard again in the next keeps its series)
             for old in gone:
                 self._sensor_last.remove(old)
             if sensor_id is not None:
                 self._sensor_last.labels(sensor_id=sensor_id).set(wall)
+
+    def _evicted(self, keep: str) -> str:
+        """Drop one sensor from the table (under the lock) and give its id: the least
+        recently heard of those with fewer than :data:`SETTLED_BATCHES` batches other than
+        ``keep`` (one-off ids), else the least recently heard. A radar gone quiet while a
+        stream of new ids comes in keeps its series, for the alert on its silence."""
+        for sensor_id, entry in self._sensors.items():
+            if entry[2] < SETTLED_BATCHES and sensor_id != keep:
+                del self._sensors[sensor_id]
+                return sensor_id
+        return self._sensors.popitem(last=False)[0]
 
     def restored(
         self, seq: int, time_: float, confirmed: int, since_last_batch: float | None = None

@@ -329,7 +329,7 @@ _NEIGHBOURS = np.array([dx * _STRIDE + dy for dx in (-1, 0, 1) for dy in (-1, 0,
 
 #: The block of cells about a position whose density :meth:`ClutterMap.around` reads: the
 #: (2k + 1)² cells centred on its own, k = AROUND_CELLS (7 x 7 cells, 140 position standard
-#: deviations across).
+#: deviations across while the cells keep the side the sensor's first detections set).
 AROUND_CELLS = 3
 _BLOCK = np.array(
     [
@@ -512,31 +512,34 @@ class ClutterMap:
 
     def around(self, sensor_id: str, z: np.ndarray, prior: float) -> np.ndarray:
         """``λ̄`` (per m²) about each of the positions ``z (m, 2)``: the density of the block
-        of ``B`` = (2k + 1)² cells centred on its cell (k = :data:`AROUND_CELLS`), with the
-        cells' prior (:meth:`read`):
+        of ``B`` = (2k + 1)² cells centred on its cell (k = :data:`AROUND_CELLS`), its prior
+        the scene's density ``λ_s`` (:meth:`_Grid.scene_rate`) with the cells' weight:
 
-            λ̄ = max((α₀ B + Σ_b c_b) / ((β₀ + E) B A), λ_c β₀ / (β₀ + MEMORY_SCANS)),
+            λ̄ = (λ_s B A β₀ + Σ_b c_b) / ((β₀ + E) B A),
 
-        ``c_b`` the decayed counts of the block's cells. The clutter a group of detections
-        must stand out from: a patch of backwash a few cells wide is many times denser than
-        the block about it, a cluster of sea clutter near a coastal radar is not (the scene's
-        density, over tens of kilometres, is a hundred times lower there). ``prior`` for a
-        sensor not seen."""
+        ``c_b`` the decayed counts of the block's cells, ``A`` a cell's area. Unlike a cell's
+        density (:meth:`read`) it has neither the margin nor the floor on its prior: where
+        the clutter is as dense as the scene's it reads the scene's, not more. The clutter a
+        group of detections must stand out from: a patch of backwash a few cells wide is
+        many times denser than the block about it, a cluster of sea clutter near a coastal
+        radar is not (the scene's density, over tens of kilometres, is a hundred times lower
+        there). ``prior`` for a sensor not seen or with no count yet."""
         z = np.asarray(z, dtype=float).reshape(-1, 2)
         grid = self._grids.get(sensor_id)
-        if grid is None or grid.scans == 0 or z.shape[0] == 0:
+        rate = None if grid is None else grid.scene_rate(prior)
+        if grid is None or rate is None or z.shape[0] == 0:
             return np.full(z.shape[0], prior)
-        rate = grid.scene_rate(prior)
         area = grid.cell * grid.cell * _BLOCK.size
-        lam0 = prior if rate is None else min(SCENE_MARGIN * rate, prior)
-        keys = (grid.cells(z)[:, None] + _BLOCK[None, :]).ravel()
+        # (the block's centre kept AROUND_CELLS inside the packed keys' bounds)
+        bound = _STRIDE // 2 - 1 - AROUND_CELLS
+        ij = np.clip(np.floor(z / grid.cell), -bound, bound).astype(np.int64)
+        keys = ((ij[:, 0] * _STRIDE + ij[:, 1])[:, None] + _BLOCK[None, :]).ravel()
         rows, found = grid.find(keys)
         counts = np.zeros(keys.size)
         if found.any():
             counts[found] = grid.decayed(rows[found])
         sums = counts.reshape(z.shape[0], _BLOCK.size).sum(axis=1)
-        lam = (lam0 * area * PRIOR_SCANS + sums) / ((PRIOR_SCANS + grid.exposure()) * area)
-        return np.maximum(lam, prior * PRIOR_SCANS / (PRIOR_SCANS + MEMORY_SCANS))
+        return (rate * area * PRIOR_SCANS + sums) / ((PRIOR_SCANS + grid.exposure()) * area)
 
     def learn(
         self,

@@ -55,7 +55,9 @@ class Scan:
         anywhere it looks, what a cluster of detections must beat to be a group.
     clutter_around : for such a scan, the false-alarm density per m² the same map learned
         about given positions ``(m, 2) -> (m,)`` (:meth:`~trackers.clutter.ClutterMap.around`:
-        a block of cells a few kilometres across for a radar), as of this step (or ``None``).
+        a block of cells a few kilometres across for a radar), or ``None``. It reads the
+        pipeline's map when called: call it while the pipeline processes this scan (the map
+        learns from the scan after every tracker has taken it).
     coverage : the area the sensor looked at (:class:`~trackers.coverage.Coverage`): a track
         outside it is not counted as missed. ``None``: everywhere, or, when several sensors
         report, where this one has been seeing things (the pipeline's learned coverage).

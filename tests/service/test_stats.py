@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from service.schemas import ERROR_REASONS, MAX_SENSOR_SERIES
-from service.stats import BATCH_SIZE_BUCKETS, PROCESSING_BUCKETS, WINDOW, Stats
+from service.stats import BATCH_SIZE_BUCKETS, PROCESSING_BUCKETS, SETTLED_BATCHES, WINDOW, Stats
 
 from .helpers import parse_prometheus
 
@@ -146,6 +146,14 @@ def test_a_quiet_feed_shows_as_time_since_the_last_batch_of_each_sensor(monkeypa
         if k.startswith("tracker_sensor_last_batch_timestamp_seconds{")
     ]
     assert len(series) == MAX_SENSOR_SERIES and not [k for k in series if "radar-" in k]
+
+    for k in range(SETTLED_BATCHES):  # a radar heard often, then quiet amid one-off ids
+        stats.processed(100 + k, 30.0 + k, 1, 1.0, 2, "radar-c")
+    for i in range(3 * MAX_SENSOR_SERIES):
+        stats.processed(200 + i, 50.0, 1, 1.0, 2, f"once-{i}")
+    listed = [e["sensor_id"] for e in stats.snapshot()["sensors"]]
+    assert len(listed) == MAX_SENSOR_SERIES and listed[-1] == "radar-c"
+    assert 'sensor_id="radar-c"' in stats.prometheus().decode()
 
     restored = Stats("y")
     restored.restored(40, 99.0, 3, since_last_batch=120.0)

@@ -48,21 +48,31 @@ def test_worked_example_of_one_scan() -> None:
 
 
 def test_worked_example_of_the_density_about_a_point() -> None:
-    """The block of 7 x 7 cells about a point: the counts of all its cells over its area, with
-    the cells' prior; a point whose block leaves the counted cell out reads the prior alone."""
+    """The block of 7 x 7 cells about a point: the counts of all its cells over its area, the
+    scene's density its prior; a point whose block leaves the counted cell out reads the
+    prior's share alone. Uniform clutter reads the scene's density: no more."""
     m = ClutterMap()
     clutter = np.array([[10.0, 10.0], [50.0, 150.0], [190.0, 5.0], [100.0, 100.0]])
     m.learn("r", clutter, _R(4))
+    rate = m._grids["r"].scene_rate(PRIOR)
     cells = (2 * AROUND_CELLS + 1) ** 2
     area = cells * 200.0**2
-    alpha0 = PRIOR * area * PRIOR_SCANS
     z = np.array([[120.0, 30.0], [650.0, -550.0], [850.0, 30.0]])  # cell 0; 3 away; 4 away
     lam = m.around("r", z, PRIOR)
-    assert lam[0] == pytest.approx((alpha0 + 4.0) / ((PRIOR_SCANS + 1.0) * area))
+    assert lam[0] == pytest.approx((rate * area * PRIOR_SCANS + 4.0) / ((PRIOR_SCANS + 1.0) * area))
     assert lam[1] == lam[0]
-    assert lam[2] == pytest.approx(alpha0 / ((PRIOR_SCANS + 1.0) * area))
+    assert lam[2] == pytest.approx(rate * PRIOR_SCANS / (PRIOR_SCANS + 1.0))
     assert lam[0] < m.density("r", z[:1], PRIOR)[0]  # the cell's own, 49 times less spread
     np.testing.assert_array_equal(ClutterMap().around("r", z, PRIOR), [PRIOR] * 3)
+
+    rng = np.random.default_rng(2)
+    uniform = ClutterMap()
+    for _ in range(60):  # 400 a scan over 40 km x 40 km: 2.5e-7 per m², below the prior
+        uniform.learn("r", rng.uniform(-2e4, 2e4, (400, 2)), _R(400, 30.0))
+    here = rng.uniform(-1.5e4, 1.5e4, (50, 2))
+    scene = uniform._grids["r"].scene_rate(PRIOR)
+    ratio = uniform.around("r", here, PRIOR) / scene
+    assert 0.8 < float(np.median(ratio)) < 1.1 and float(ratio.max()) < 1.5
 
 
 def test_counts_are_forgotten_and_the_density_is_floored() -> None:
