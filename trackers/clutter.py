@@ -323,22 +323,20 @@ def _around(key: int) -> np.ndarray:
     return (key + _NEIGHBOURS).astype(np.int64)
 
 
-#: ``ix · _STRIDE + iy`` offsets of a cell's 3 x 3 block
-_NEIGHBOURS = np.array([dx * _STRIDE + dy for dx in (-1, 0, 1) for dy in (-1, 0, 1)])
+def _block(k: int) -> np.ndarray:
+    """The ``ix · _STRIDE + iy`` offsets of the (2k + 1)² cells centred on a cell, row by row."""
+    steps = range(-k, k + 1)
+    return np.array([dx * _STRIDE + dy for dx in steps for dy in steps], dtype=np.int64)
 
+
+#: a cell's 3 x 3 block
+_NEIGHBOURS = _block(1)
 
 #: The block of cells about a position whose density :meth:`ClutterMap.around` reads: the
 #: (2k + 1)² cells centred on its own, k = AROUND_CELLS (7 x 7 cells, 140 position standard
 #: deviations across while the cells keep the side the sensor's first detections set).
 AROUND_CELLS = 3
-_BLOCK = np.array(
-    [
-        dx * _STRIDE + dy
-        for dx in range(-AROUND_CELLS, AROUND_CELLS + 1)
-        for dy in range(-AROUND_CELLS, AROUND_CELLS + 1)
-    ],
-    dtype=np.int64,
-)
+_BLOCK = _block(AROUND_CELLS)
 
 
 def _block_seen(grid: _Grid, key: int) -> float:
@@ -391,10 +389,21 @@ class _Grid:
             (SCENE_PRIOR_SCANS + self.exposure()) * area
         )
 
-    def cells(self, z: np.ndarray) -> np.ndarray:
+    def cells(self, z: np.ndarray, margin: int = 0) -> np.ndarray:
+        """The packed keys of the cells of positions ``z (n, 2)``, their indices clipped
+        ``margin`` cells inside the packing's bounds (room for a block of cells about them)."""
         ij = np.floor(z / self.cell).astype(np.int64)
-        np.clip(ij, -(_STRIDE // 2) + 1, _STRIDE // 2 - 1, out=ij)
+        bound = _STRIDE // 2 - 1 - margin
+        np.clip(ij, -bound, bound, out=ij)
         return ij[:, 0] * _STRIDE + ij[:, 1]
+
+    def counts_at(self, keys: np.ndarray) -> np.ndarray:
+        """The decayed counts of the cells ``keys`` now (0 for a cell the grid lacks)."""
+        rows, found = self.find(keys)
+        counts = np.zeros(keys.size)
+        if found.any():
+            counts[found] = self.decayed(rows[found])
+        return counts
 
     def find(self, keys: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """For packed cell ``keys``, the row of each in the grid (clipped into it) and whether
@@ -503,10 +512,7 @@ class ClutterMap:
         area = grid.cell * grid.cell
         lam0 = prior if rate is None else min(SCENE_MARGIN * rate, prior)
         alpha0 = lam0 * area * PRIOR_SCANS
-        rows, found = grid.find(grid.cells(z))
-        counts = np.zeros(z.shape[0])
-        if found.any():
-            counts[found] = grid.decayed(rows[found])
+        counts = grid.counts_at(grid.cells(z))
         lam = (alpha0 + counts) / ((PRIOR_SCANS + grid.exposure()) * area)
         return np.maximum(lam, prior * PRIOR_SCANS / (PRIOR_SCANS + MEMORY_SCANS)), rate
 
@@ -530,15 +536,8 @@ class ClutterMap:
         if grid is None or rate is None or z.shape[0] == 0:
             return np.full(z.shape[0], prior)
         area = grid.cell * grid.cell * _BLOCK.size
-        # (the block's centre kept AROUND_CELLS inside the packed keys' bounds)
-        bound = _STRIDE // 2 - 1 - AROUND_CELLS
-        ij = np.clip(np.floor(z / grid.cell), -bound, bound).astype(np.int64)
-        keys = ((ij[:, 0] * _STRIDE + ij[:, 1])[:, None] + _BLOCK[None, :]).ravel()
-        rows, found = grid.find(keys)
-        counts = np.zeros(keys.size)
-        if found.any():
-            counts[found] = grid.decayed(rows[found])
-        sums = counts.reshape(z.shape[0], _BLOCK.size).sum(axis=1)
+        keys = (grid.cells(z, AROUND_CELLS)[:, None] + _BLOCK[None, :]).ravel()
+        sums = grid.counts_at(keys).reshape(z.shape[0], _BLOCK.size).sum(axis=1)
         return (rate * area * PRIOR_SCANS + sums) / ((PRIOR_SCANS + grid.exposure()) * area)
 
     def learn(

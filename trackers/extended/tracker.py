@@ -440,9 +440,9 @@ def _hypot(x: float, y: float) -> float:
     return float(np.hypot(x, y))
 
 
-def _one_to_one(n_trk: np.ndarray, n_det: np.ndarray) -> np.ndarray:
+def _one_to_one(n_trk: np.ndarray | int, n_det: np.ndarray | int) -> np.ndarray | bool:
     """Whether connected sets of ``n_trk`` tracks and ``n_det`` detections are explained one
-    to one: one or two detections, and at least as many tracks."""
+    to one: one or two detections, and at least as many tracks (arrays or plain ints)."""
     return (n_trk >= n_det) & (n_det <= 2)
 
 
@@ -470,9 +470,7 @@ def _sets_of_few(
     n_trk[at] = [size_of[d][0] for d in d_list]
     n_det[at] = [size_of[d][1] for d in d_list]
     tracks = [node for node in size_of if node >= n_d]
-    track_ok[[node - n_d for node in tracks]] = [
-        size_of[node][0] >= size_of[node][1] and size_of[node][1] <= 2 for node in tracks
-    ]
+    track_ok[[node - n_d for node in tracks]] = [_one_to_one(*size_of[node]) for node in tracks]
 
 
 class _PointGates:
@@ -571,9 +569,7 @@ class _PointGates:
         track_ok = np.zeros(self.rows.size, dtype=bool)  # a track with no detection: no
         track_ok[trk] = True
         if det.size:
-            shared = (np.bincount(det, minlength=self.size)[det] > 1) | (
-                np.bincount(trk, minlength=self.rows.size)[trk] > 1
-            )
+            shared = self._shared
             at = np.flatnonzero(shared)
             if 0 < at.size <= UNION_FIND_EDGES:
                 # A few pairs (the usual case): their sets by one plain loop, no node arrays.
@@ -618,6 +614,14 @@ class _PointGates:
         return (np.take(n_det, self.det) == 1) & (np.take(n_trk, self.trk) == 1)
 
     @cached_property
+    def _shared(self) -> np.ndarray:
+        """Mask of the gate pairs whose detection or track is in another pair too."""
+        det, trk = self.det, self.trk
+        return (np.bincount(det, minlength=self.size)[det] > 1) | (
+            np.bincount(trk, minlength=self.rows.size)[trk] > 1
+        )
+
+    @cached_property
     def explained_detections(self) -> np.ndarray:
         """Mask of the scan's detections in a gate pair the tracks explain one to one,
         ``detections(explained)``, without :attr:`_sets`' per-pair arrays when nothing else
@@ -629,9 +633,7 @@ class _PointGates:
         out = np.zeros(self.size, dtype=bool)
         if det.size == 0:
             return out
-        shared = (np.bincount(det, minlength=self.size)[det] > 1) | (
-            np.bincount(trk, minlength=self.rows.size)[trk] > 1
-        )
+        shared = self._shared
         out[det[~shared]] = True  # a pair in no set with another: one to one
         at = np.flatnonzero(shared)
         if at.size:
@@ -639,7 +641,7 @@ class _PointGates:
             k_list = [n_d + k for k in np.take(trk, at).tolist()]
             for group in edge_groups(np.take(det, at).tolist(), k_list):
                 dets = [node for node in group if node < n_d]
-                if len(dets) <= 2 and len(group) - len(dets) >= len(dets):
+                if _one_to_one(len(group) - len(dets), len(dets)):
                     out[dets] = True
         return out
 
